@@ -1,0 +1,73 @@
+"""Result types of ray queries."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Surface fields a closest-hit query can be asked for, besides t and the ids that it always returns.
+SURFACE_FIELDS = ("uv", "normal", "point")
+
+
+@dataclass(frozen=True)
+class Hits:
+    """Closest hit of each ray.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        Ray parameter of the hit (``origin + t * direction``); ``inf`` where the ray missed.
+    geom_id, prim_id : ndarray of int64, shape (N,)
+        Geometry id (as returned by ``Scene.add_*``) and primitive index within it (the face index
+        for meshes, 0 for analytic shapes); -1 where the ray missed.
+    uv : ndarray, shape (N, 2), or None
+        Barycentrics (u, v) of the hit for triangles, the shape's surface parameters otherwise;
+        NaN where missed.  Only computed when asked for.
+    normal : ndarray, shape (N, 3), or None
+        Unit geometric normal (facing is not flipped towards the ray); NaN where missed.
+    point : ndarray, shape (N, 3), or None
+        Hit point ``origin + t * direction``; NaN where missed.
+    """
+
+    t: np.ndarray
+    geom_id: np.ndarray
+    prim_id: np.ndarray
+    uv: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    point: np.ndarray | None = None
+
+    @property
+    def hit(self):
+        """(N,) bool: whether each ray hit anything."""
+        return self.geom_id >= 0
+
+    def __len__(self):
+        return len(self.t)
+
+
+@dataclass(frozen=True)
+class AllHits:
+    """Every hit along every ray, sorted by (ray, t).
+
+    Attributes
+    ----------
+    ray_index : ndarray of int64, shape (H,)
+        Which ray each hit belongs to; non-decreasing.
+    t : ndarray, shape (H,)
+    geom_id, prim_id : ndarray of int64, shape (H,)
+    counts : ndarray of int64, shape (N,)
+        Number of hits of each ray; ``offsets`` gives where each ray's hits start.
+    """
+
+    ray_index: np.ndarray
+    t: np.ndarray
+    geom_id: np.ndarray
+    prim_id: np.ndarray
+    counts: np.ndarray
+
+    @property
+    def offsets(self):
+        """(N + 1,) int64: the hits of ray i are ``[offsets[i], offsets[i + 1])``."""
+        return np.concatenate(([0], np.cumsum(self.counts)))
+
+    def __len__(self):
+        return len(self.t)

@@ -1,0 +1,114 @@
+"""Validation and normalisation of ray batches at the library's edge.
+
+Kernels trust their inputs; everything a caller can get wrong is caught here, once, with a
+``ValueError`` that names the offending argument.
+"""
+
+import numpy as np
+
+DTYPES = {"float32": np.float32, "float64": np.float64}
+
+
+def resolve_dtype(dtype):
+    """Return ``np.float32`` or ``np.float64`` for a dtype-like, else raise ``ValueError``."""
+    try:
+        resolved = np.dtype(dtype).type
+    except TypeError as error:
+        raise ValueError(f"dtype must be 'float32' or 'float64', got {dtype!r}") from error
+    if resolved not in (np.float32, np.float64):
+        raise ValueError(f"dtype must be 'float32' or 'float64', got {dtype!r}")
+    return resolved
+
+
+def as_float_array(value, name, dtype, shape=None):
+    """Convert ``value`` to a C-contiguous finite array of ``dtype``.
+
+    Parameters
+    ----------
+    value : array_like
+        Real numbers (bool, int or float); objects, strings and complex numbers are refused.
+    name : str
+        The argument's name, used in error messages.
+    dtype : numpy float type
+    shape : tuple of (int or None), optional
+        Expected shape; ``None`` entries match any length.
+
+    Raises
+    ------
+    ValueError
+        On a non-numeric value, a shape mismatch, or NaN/inf entries.
+    """
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name} must be an array of real numbers: {error}") from error
+    if array.dtype.kind not in "biuf":
+        raise ValueError(f"{name} must hold real numbers, got dtype {array.dtype}")
+    if shape is not None and (
+        array.ndim != len(shape)
+        or any(want is not None and got != want for got, want in zip(array.shape, shape))
+    ):
+        expected = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        raise ValueError(f"{name} must have shape {expected}, got {array.shape}")
+    array = np.ascontiguousarray(array, dtype=dtype)
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name} must be finite (no NaN or inf)")
+    return array
+
+
+def as_ray_bound(value, name, count, dtype):
+    """Return a per-ray bound (``tmin`` or ``tmax``) as an (N,) array; a scalar is broadcast.
+
+    Infinity is allowed (``tmax=np.inf`` is the usual "no limit"); NaN is not.
+    """
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name} must be a number or an (N,) array of numbers") from error
+    if array.ndim == 0:
+        array = np.full(count, array, dtype=np.float64)
+    elif array.shape != (count,):
+        raise ValueError(f"{name} must be a scalar or have shape ({count},), got {array.shape}")
+    if np.any(np.isnan(array)):
+        raise ValueError(f"{name} must not contain NaN")
+    return np.ascontiguousarray(array, dtype=dtype)
+
+
+def prepare_rays(origins, directions, tmin=0.0, tmax=np.inf, dtype=np.float64):
+    """Validate a ray batch and return contiguous arrays in one precision.
+
+    Directions are not normalised: as in Embree, a hit at parameter t lies at
+    ``origin + t * direction``.
+
+    Parameters
+    ----------
+    origins, directions : array_like, shape (N, 3)
+    tmin, tmax : float or array_like of shape (N,)
+    dtype : numpy float type
+
+    Returns
+    -------
+    origins, directions : ndarray, shape (N, 3)
+    tmin, tmax : ndarray, shape (N,)
+
+    Raises
+    ------
+    ValueError
+        Naming ``origins``, ``directions``, ``tmin`` or ``tmax``: wrong shape or dtype, NaN or inf
+        coordinates, zero-length directions, NaN bounds.
+    """
+    origins = as_float_array(origins, "origins", dtype, (None, 3))
+    directions = as_float_array(directions, "directions", dtype, (len(origins), 3))
+    zero = ~np.any(directions != 0, axis=1)
+    if np.any(zero):
+        raise ValueError(
+            f"directions must be non-zero; {int(zero.sum())} ray(s) have zero length, "
+            f"first at index {int(np.argmax(zero))}"
+        )
+    count = len(origins)
+    return (
+        origins,
+        directions,
+        as_ray_bound(tmin, "tmin", count, dtype),
+        as_ray_bound(tmax, "tmax", count, dtype),
+    )
