@@ -1,0 +1,117 @@
+"""Triangle meshes: validation, per-mesh BVH, and loading files through trimesh."""
+
+import time
+
+import numpy as np
+
+from raycore.bvh.layout import build_bvh
+from raycore.rays import as_float_array
+
+
+class Mesh:
+    """Vertices and faces of a triangle mesh, and its BVH once built.
+
+    Parameters
+    ----------
+    vertices : array_like, shape (V, 3)
+    faces : array_like of int, shape (F, 3)
+
+    Raises
+    ------
+    ValueError
+        Naming ``vertices`` or ``faces``: wrong shape, non-finite coordinates, no faces, indices
+        that are not integers or lie outside [0, V).
+    """
+
+    def __init__(self, vertices, faces):
+        self.vertices = as_float_array(vertices, "vertices", np.float64, (None, 3))
+        faces = np.asarray(faces)
+        if faces.dtype.kind not in "iu":
+            if faces.dtype.kind != "f" or not np.all(np.isfinite(faces)) or np.any(
+                    faces != np.round(faces)):
+                raise ValueError(f"faces must hold integer vertex indices, got dtype {faces.dtype}")
+        if faces.ndim != 2 or faces.shape[1] != 3:
+            raise ValueError(f"faces must have shape (F, 3), got {faces.shape}")
+        if len(faces) == 0:
+            raise ValueError("faces must hold at least one triangle")
+        if faces.min() < 0 or faces.max() >= len(self.vertices):
+            raise ValueError(
+                f"faces must index vertices in [0, {len(self.vertices)}), "
+                f"got indices in [{faces.min()}, {faces.max()}]")
+        self.faces = np.ascontiguousarray(faces, dtype=np.int64)
+        self.bvh = None
+        self.leaf_vertices = None
+        self.build_seconds = 0.0
+        self._built_for = None
+
+    @property
+    def bounds(self):
+        """(lo, hi): (3,) float64 bounds of the referenced vertices."""
+        used = self.vertices[self.faces.ravel()]
+        return used.min(axis=0), used.max(axis=0)
+
+    def transformed_bounds(self, matrix):
+        """World bounds of the mesh under a 4x4 affine ``matrix`` (its box's 8 corners)."""
+        lo, hi = self.bounds
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                            for z in (lo[2], hi[2])])
+        world = corners @ matrix[:3, :3].T + matrix[:3, 3]
+        return world.min(axis=0), world.max(axis=0)
+
+    def build(self, dtype, params):
+        """Build the BVH for triangles stored in ``dtype`` (once per dtype and parameters)."""
+        if self._built_for == (dtype, params):
+            return
+        start = time.perf_counter()
+        # bound the triangles as the kernels will see them, after rounding to dtype
+        corners = self.vertices.astype(dtype)[self.faces]  # (F, 3 vertices, 3)
+        bounded = corners.astype(np.float64)
+        self.bvh = build_bvh(bounded.min(axis=1), bounded.max(axis=1), params)
+        self.leaf_vertices = np.ascontiguousarray(corners[self.bvh.order].reshape(-1, 9))
+        self.build_seconds = time.perf_counter() - start
+        self._built_for = (dtype, params)
+
+    @property
+    def nbytes(self):
+        """Bytes held for ray queries: the BVH and the triangles in leaf order."""
+        return self.bvh.nbytes + self.leaf_vertices.nbytes
+
+
+def validate_transform(transform):
+    """Return a 4x4 float64 affine matrix, or raise ``ValueError`` naming ``transform``.
+
+    Accepts (4, 4) with last row (0, 0, 0, 1) or (3, 4); the linear part must be invertible.
+    """
+    matrix = as_float_array(transform, "transform", np.float64)
+    if matrix.shape == (3, 4):
+        matrix = np.vstack([matrix, [0.0, 0.0, 0.0, 1.0]])
+    if matrix.shape != (4, 4):
+        raise ValueError(f"transform must have shape (4, 4) or (3, 4), got {matrix.shape}")
+    if not np.array_equal(matrix[3], [0.0, 0.0, 0.0, 1.0]):
+        raise ValueError("transform must be affine: its last row must be (0, 0, 0, 1)")
+    if np.linalg.cond(matrix[:3, :3]) > 1e12:
+        raise ValueError("transform must be invertible (its linear part is singular)")
+    return matrix
+
+
+def load_trimesh(path_or_file, file_type=None):
+    """Load a mesh file with trimesh; return a ``trimesh.Trimesh`` or ``trimesh.Scene``.
+
+    Raises
+    ------
+    ValueError
+        When trimesh cannot read the file or it holds no triangles.
+    """
+    import trimesh
+
+    try:
+        loaded = trimesh.load(path_or_file, file_type=file_type, process=False)
+    except Exception as error:  # trimesh raises many exception types for unreadable input
+        raise ValueError(f"could not read the mesh file: {error}") from error
+    if isinstance(loaded, trimesh.Scene):
+        if not any(isinstance(g, trimesh.Trimesh) and len(g.faces) for g in
+                   loaded.geometry.values()):
+            raise ValueError("the mesh file holds no triangles")
+    elif not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise ValueError("the mesh file holds no triangles")
+    return loaded

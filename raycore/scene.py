@@ -1,0 +1,395 @@
+"""Scene: a registry of geometry, its two-level BVH, and the ray queries.
+
+Every ``add_*`` returns a geometry id (the index of the object it creates).  Meshes get their own
+BVH once, shared by all their instances; the top-level BVH is rebuilt over objects when the scene
+changes.  Analytic shapes stay analytic: a sphere is one object, not a tessellation.
+"""
+
+import time
+
+import numpy as np
+
+from raycore import queries
+from raycore.bvh.build import BuildParams
+from raycore.bvh.layout import NODE_WIDTH, build_bvh
+from raycore.bvh.traverse import MESH
+from raycore.hits import SURFACE_FIELDS, AllHits, Hits
+from raycore.mesh import Mesh, validate_transform
+from raycore.primitives import analytic, box, cone, cylinder, disk, plane, sphere
+from raycore.primitives.triangle import triangle_test_code
+from raycore.rays import as_float_array, prepare_rays, resolve_dtype
+
+#: Shapes that enclose a volume, so that ``contains`` can count crossings of them.
+_CLOSED_KINDS = {analytic.SPHERE, analytic.BOX, analytic.TRANSFORMED_BOX, analytic.CYLINDER,
+                 analytic.CONE, MESH}
+
+#: Directions for ``contains``: a majority vote over three rays makes the parity test robust to a
+#: ray that grazes a mesh (touches it without crossing).  Irrational-looking components keep them
+#: off axis-aligned and symmetric features.
+_CONTAINS_DIRECTIONS = np.array([
+    [0.5773502691896258, 0.5773502691896258, 0.5773502691896257],
+    [-0.3163755790315131, 0.8433432417069424, 0.4344235271543209],
+    [0.7247963917217364, -0.2510937052283718, -0.6416733155716311],
+])
+
+
+class Scene:
+    """A set of analytic shapes and triangle meshes, queried with batches of rays.
+
+    Parameters
+    ----------
+    dtype : {"float32", "float64"}
+        Precision of the stored geometry and of every kernel.
+    bins, max_leaf_size, traversal_cost, intersection_cost
+        SAH build parameters (see :class:`raycore.bvh.build.BuildParams`).
+
+    Examples
+    --------
+    >>> scene = Scene(dtype="float64")
+    >>> sphere = scene.add_sphere([0, 0, 5], 1.0)
+    >>> hits = scene.intersect([[0, 0, 0]], [[0, 0, 1]], fields=("normal",))
+    >>> float(hits.t[0]), int(hits.geom_id[0]), hits.normal[0].tolist()
+    (4.0, 0, [0.0, 0.0, -1.0])
+    """
+
+    def __init__(self, dtype="float32", *, bins=16, max_leaf_size=4, traversal_cost=1.0,
+                 intersection_cost=1.0):
+        self.dtype = resolve_dtype(dtype)
+        self.build_params = BuildParams(bins, max_leaf_size, traversal_cost, intersection_cost)
+        self._meshes = []  # Mesh, each with its BVH built lazily
+        self._kind = []  # per object
+        self._param_row = []
+        self._mesh_of = []
+        self._xform_row = []
+        self._visible = []
+        self._params = []  # (20,) float64 rows of analytic shapes
+        self._xforms = []  # (3, 4) float64 object-from-world matrices of instances
+        self._instance_bounds = {}  # object -> (lo, hi) in world space
+        self._packed = None
+        self._top = None
+        self.build_seconds = 0.0
+
+    # ------------------------------------------------------------------ geometry
+
+    def _add_object(self, kind, *, params=None, mesh=-1, xform=None, visible=True):
+        self._kind.append(kind)
+        self._param_row.append(len(self._params) if params is not None else -1)
+        if params is not None:
+            self._params.append(params)
+        self._mesh_of.append(mesh)
+        self._xform_row.append(len(self._xforms) if xform is not None else -1)
+        if xform is not None:
+            self._xforms.append(xform)
+        self._visible.append(visible)
+        self._packed = None
+        return len(self._kind) - 1
+
+    def add_mesh(self, vertices, faces, *, visible=True):
+        """Add a triangle mesh; return its geometry id.
+
+        Parameters
+        ----------
+        vertices : array_like, shape (V, 3)
+        faces : array_like of int, shape (F, 3)
+            Vertex indices, each in [0, V).
+        visible : bool
+            False makes the mesh a prototype that only appears through :meth:`add_instance`.
+        """
+        mesh = Mesh(vertices, faces)
+        self._meshes.append(mesh)
+        return self._add_object(MESH, mesh=len(self._meshes) - 1, visible=bool(visible))
+
+    def add_instance(self, geom_id, transform):
+        """Place another copy of mesh ``geom_id`` under a 4x4 affine ``transform``; return its id.
+
+        The copy shares the mesh's vertices and BVH: memory does not grow with the mesh's size.
+        """
+        if not (isinstance(geom_id, (int, np.integer)) and 0 <= geom_id < len(self._kind)
+                and self._kind[geom_id] == MESH):
+            raise ValueError(f"geom_id must be the id of a mesh in this scene, got {geom_id!r}")
+        matrix = validate_transform(transform)
+        mesh_index = self._mesh_of[geom_id]
+        obj = self._add_object(MESH, mesh=mesh_index, xform=np.linalg.inv(matrix)[:3])
+        self._instance_bounds[obj] = self._meshes[mesh_index].transformed_bounds(matrix)
+        return obj
+
+    def add_sphere(self, center, radius):
+        """Add a sphere; return its geometry id."""
+        return self._add_object(analytic.SPHERE, params=sphere.pack(center, radius))
+
+    def add_plane(self, point, normal):
+        """Add an infinite plane through ``point`` with ``normal``; return its geometry id."""
+        return self._add_object(analytic.PLANE, params=plane.pack(point, normal))
+
+    def add_disk(self, center, normal, radius):
+        """Add a disk; return its geometry id."""
+        return self._add_object(analytic.DISK, params=disk.pack(center, normal, radius))
+
+    def add_box(self, lo, hi, transform=None):
+        """Add an axis-aligned box [lo, hi], optionally under a 4x4 affine ``transform``."""
+        if transform is None:
+            return self._add_object(analytic.BOX, params=box.pack(lo, hi))
+        return self._add_object(analytic.TRANSFORMED_BOX,
+                                params=box.pack_transformed(lo, hi, transform))
+
+    def add_cylinder(self, p0, p1, radius):
+        """Add a cylinder from ``p0`` to ``p1``, capped at both ends; return its geometry id."""
+        return self._add_object(analytic.CYLINDER,
+                                params=cylinder.pack(p0, p1, radius))
+
+    def add_cone(self, base_center, apex, radius):
+        """Add a cone with its base (capped) at ``base_center``; return its geometry id."""
+        return self._add_object(analytic.CONE,
+                                params=cone.pack(base_center, apex, radius))
+
+    def __len__(self):
+        return len(self._kind)
+
+    @property
+    def triangle_count(self):
+        """Triangles stored (instances share their mesh's)."""
+        return sum(len(mesh.faces) for mesh in self._meshes)
+
+    # ------------------------------------------------------------------ build
+
+    def _object_bounds(self, obj):
+        kind = self._kind[obj]
+        if kind == MESH:
+            if obj in self._instance_bounds:
+                return self._instance_bounds[obj]
+            return self._meshes[self._mesh_of[obj]].bounds
+        # bound the shape as stored, in the scene's precision
+        params = self._params[self._param_row[obj]].astype(self.dtype).astype(np.float64)
+        return analytic.analytic_bounds(kind, params)
+
+    def build(self):
+        """Build (or rebuild) the BVHs; queries call this when the scene changed."""
+        start = time.perf_counter()
+        for mesh in self._meshes:
+            mesh.build(self.dtype, self.build_params)
+        visible = np.flatnonzero(self._visible)
+        bounds = [self._object_bounds(obj) for obj in visible]
+        lo = np.array([b[0] for b in bounds]).reshape(-1, 3)
+        hi = np.array([b[1] for b in bounds]).reshape(-1, 3)
+        finite = np.all(np.isfinite(lo) & np.isfinite(hi), axis=1)
+        bounded = visible[finite]
+        if len(bounded):
+            # instance boxes are computed from rounded transforms: pad them by a few ulps
+            span = np.maximum(np.abs(lo[finite]), np.abs(hi[finite])).max(axis=1, keepdims=True)
+            pad = 64 * np.finfo(self.dtype).eps * span
+            self._top = build_bvh(lo[finite] - pad, hi[finite] + pad, self.build_params)
+            top = (self._top.nodes, self._top.refs, bounded[self._top.order],
+                   visible[~finite])
+        else:
+            self._top = None
+            empty = np.zeros((0, NODE_WIDTH), np.float32)
+            top = (empty, empty.view(np.int32), np.zeros(0, np.int64), visible[~finite])
+
+        dtype = self.dtype
+        params = np.array(self._params, dtype=dtype).reshape(-1, analytic.PARAM_WIDTH)
+        xforms = np.array(self._xforms, dtype=dtype).reshape(-1, 12)
+        objects = (np.array(self._kind, np.int64), np.array(self._param_row, np.int64),
+                   np.array(self._mesh_of, np.int64), np.array(self._xform_row, np.int64),
+                   params, xforms)
+        empty_nodes = np.zeros((0, NODE_WIDTH), np.float32)
+        mesh_nodes = np.concatenate([m.bvh.nodes for m in self._meshes] or [empty_nodes])
+        node_base = np.cumsum([0] + [len(m.bvh.nodes) for m in self._meshes])[:-1]
+        tri_base = np.cumsum([0] + [len(m.faces) for m in self._meshes])[:-1]
+        meshes = (
+            mesh_nodes,
+            mesh_nodes.view(np.int32),
+            np.concatenate([m.leaf_vertices for m in self._meshes] or [np.zeros((0, 9), dtype)]),
+            node_base.astype(np.int64),
+            tri_base.astype(np.int64),
+        )
+        # leaf-order position -> face index, over all meshes
+        self._leaf_face = np.concatenate(
+            [m.bvh.order for m in self._meshes] or [np.zeros(0, np.int64)])
+        # one flat tuple of arrays, in the order of raycore.bvh.traverse.trace_rays's arguments
+        self._packed = top + objects + meshes
+        self.build_seconds = time.perf_counter() - start
+        return self
+
+    def _scene(self):
+        if self._packed is None:
+            self.build()
+        return self._packed
+
+    @property
+    def bounds(self):
+        """(lo, hi): (3,) float64 bounds of the bounded objects (inf where empty)."""
+        self._scene()
+        if self._top is None:
+            return np.full(3, np.inf), np.full(3, -np.inf)
+        return self._top.lo.copy(), self._top.hi.copy()
+
+    def stats(self):
+        """Tree quality and memory: a dict with the top-level BVH's and each mesh's figures.
+
+        Each BVH reports ``sah_cost``, ``depth``, ``nodes``, ``leaves`` and ``bytes``; meshes also
+        report ``triangles`` and ``build_seconds``.
+        """
+        self._scene()
+
+        def describe(bvh):
+            if bvh is None:
+                return None
+            return {"sah_cost": bvh.sah_cost, "depth": bvh.depth, "nodes": bvh.node_count,
+                    "leaves": bvh.leaf_count, "bytes": bvh.nbytes}
+
+        meshes = [dict(describe(m.bvh), triangles=len(m.faces), build_seconds=m.build_seconds,
+                       bytes=m.nbytes) for m in self._meshes]
+        return {"top": describe(self._top), "meshes": meshes, "objects": len(self._kind),
+                "bytes": sum(m["bytes"] for m in meshes)
+                + (self._top.nbytes if self._top is not None else 0)}
+
+    # ------------------------------------------------------------------ queries
+
+    def _rays(self, origins, directions, tmin, tmax):
+        return prepare_rays(origins, directions, tmin, tmax, self.dtype)
+
+    def _prim_ids(self, obj, prim):
+        """Map leaf-order triangles to face indices; analytic shapes have primitive 0."""
+        out = np.full(len(obj), -1, np.int64)
+        hit = obj >= 0
+        is_mesh = np.zeros(len(obj), bool)
+        is_mesh[hit] = np.asarray(self._kind)[obj[hit]] == MESH
+        out[hit & ~is_mesh] = 0
+        out[is_mesh] = self._leaf_face[prim[is_mesh]]
+        return out
+
+    def intersect(self, origins, directions, tmin=0.0, tmax=np.inf, *,
+                  triangle_test="watertight", sphere_method="precise", fields=()):
+        """Closest hit of each ray.
+
+        Parameters
+        ----------
+        origins, directions : array_like, shape (N, 3)
+            Directions need not be unit length; t is in units of their length.
+        tmin, tmax : float or array_like of shape (N,)
+        triangle_test : {"watertight", "moller", "geometric"}
+        sphere_method : {"precise", "geometric", "analytic"}
+        fields : iterable of {"uv", "normal", "point"}
+            Surface data to compute besides t and the ids.
+
+        Returns
+        -------
+        Hits
+        """
+        fields = _check_fields(fields)
+        origins, directions, tmin, tmax = self._rays(origins, directions, tmin, tmax)
+        scene = self._scene()
+        t, obj, prim, u, v = queries.closest_hits(
+            origins, directions, tmin, tmax, triangle_test_code(triangle_test),
+            analytic.sphere_method_code(sphere_method), scene)
+        surface = {}
+        if fields:
+            kind, param_row, _, xform_row, params, xforms = scene[4:10]
+            uv, normal, point = queries.surface_fields(
+                origins, directions, t, obj, prim, u, v, kind, param_row, xform_row, params,
+                xforms, scene[12], "uv" in fields, "normal" in fields, "point" in fields)
+            surface = {name: value for name, value in
+                       (("uv", uv), ("normal", normal), ("point", point)) if name in fields}
+        return Hits(t=t, geom_id=obj, prim_id=self._prim_ids(obj, prim), **surface)
+
+    def occluded(self, origins, directions, tmin=0.0, tmax=np.inf, *,
+                 triangle_test="watertight", sphere_method="precise"):
+        """(N,) bool: whether anything lies on each ray within [tmin, tmax] (stops at the first)."""
+        origins, directions, tmin, tmax = self._rays(origins, directions, tmin, tmax)
+        return queries.any_hits(origins, directions, tmin, tmax,
+                                triangle_test_code(triangle_test),
+                                analytic.sphere_method_code(sphere_method), self._scene())
+
+    def intersect_all(self, origins, directions, tmin=0.0, tmax=np.inf, *,
+                      triangle_test="watertight", sphere_method="precise"):
+        """Every surface crossing along each ray, sorted by (ray, t).
+
+        A ray through an edge or vertex shared by several triangles of one mesh crosses the
+        surface once and is reported once.
+
+        Returns
+        -------
+        AllHits
+        """
+        origins, directions, tmin, tmax = self._rays(origins, directions, tmin, tmax)
+        counts, t, obj, prim = queries.all_hits(
+            origins, directions, tmin, tmax, triangle_test_code(triangle_test),
+            analytic.sphere_method_code(sphere_method), self._scene())
+        ray_index = np.repeat(np.arange(len(origins), dtype=np.int64), counts)
+        return AllHits(ray_index=ray_index, t=t, geom_id=obj, prim_id=self._prim_ids(obj, prim),
+                       counts=counts)
+
+    def count(self, origins, directions, tmin=0.0, tmax=np.inf, *,
+              triangle_test="watertight", sphere_method="precise"):
+        """(N,) int64: number of surface crossings along each ray (see :meth:`intersect_all`)."""
+        return self.intersect_all(origins, directions, tmin, tmax, triangle_test=triangle_test,
+                                  sphere_method=sphere_method).counts
+
+    def contains(self, points):
+        """(M,) bool: whether each point lies inside a closed object of the scene.
+
+        Counts crossings of each closed object along three rays from the point; a point is inside
+        an object when the count is odd, and the three rays vote.  Meant for closed (watertight)
+        meshes and the closed analytic shapes; planes and disks enclose nothing and are ignored.
+        """
+        points = as_float_array(points, "points", self.dtype, (None, 3))
+        kinds = np.asarray(self._kind, np.int64)
+        closed = np.isin(kinds, list(_CLOSED_KINDS))
+        votes = np.zeros(len(points), np.int64)
+        for direction in _CONTAINS_DIRECTIONS:
+            hits = self.intersect_all(points, np.broadcast_to(direction, points.shape))
+            keep = closed[hits.geom_id]
+            # parity of crossings per (point, object)
+            key = hits.ray_index[keep] * len(kinds) + hits.geom_id[keep]
+            pairs, crossings = np.unique(key, return_counts=True)
+            inside = np.zeros(len(points), bool)
+            inside[pairs[crossings % 2 == 1] // len(kinds)] = True
+            votes += inside
+        return votes >= 2
+
+    # ------------------------------------------------------------------ interop
+
+    @classmethod
+    def from_trimesh(cls, mesh_or_scene, dtype="float32", **build):
+        """Build a Scene from a ``trimesh.Trimesh`` or a ``trimesh.Scene``.
+
+        A trimesh Scene's geometries become meshes and its graph's placements become instances,
+        so a geometry used many times is stored once.
+        """
+        import trimesh
+
+        scene = cls(dtype=dtype, **build)
+        if isinstance(mesh_or_scene, trimesh.Trimesh):
+            scene.add_mesh(mesh_or_scene.vertices, mesh_or_scene.faces)
+            return scene
+        if not isinstance(mesh_or_scene, trimesh.Scene):
+            raise ValueError("mesh_or_scene must be a trimesh.Trimesh or trimesh.Scene, "
+                             f"got {type(mesh_or_scene).__name__}")
+        prototypes = {}
+        for node in mesh_or_scene.graph.nodes_geometry:
+            transform, name = mesh_or_scene.graph[node]
+            geometry = mesh_or_scene.geometry[name]
+            if not isinstance(geometry, trimesh.Trimesh) or len(geometry.faces) == 0:
+                continue
+            if name not in prototypes:
+                prototypes[name] = scene.add_mesh(geometry.vertices, geometry.faces,
+                                                  visible=False)
+            scene.add_instance(prototypes[name], transform)
+        return scene
+
+    @classmethod
+    def from_file(cls, path, dtype="float32", **build):
+        """Load a mesh file (OBJ, PLY, STL, OFF, GLB, ... through trimesh) into a Scene."""
+        from raycore.mesh import load_trimesh
+
+        return cls.from_trimesh(load_trimesh(path), dtype=dtype, **build)
+
+
+def _check_fields(fields):
+    if isinstance(fields, str):
+        fields = (fields,)
+    fields = tuple(fields)
+    unknown = [f for f in fields if f not in SURFACE_FIELDS]
+    if unknown:
+        raise ValueError(f"fields must be among {SURFACE_FIELDS}, got {unknown}")
+    return fields
