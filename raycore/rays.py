@@ -5,6 +5,7 @@ Kernels trust their inputs; everything a caller can get wrong is caught here, on
 """
 
 import numpy as np
+from numba import njit, prange
 
 DTYPES = {"float32": np.float32, "float64": np.float64}
 
@@ -74,6 +75,45 @@ def as_ray_bound(value, name, count, dtype):
     return np.ascontiguousarray(array, dtype=dtype)
 
 
+# Codes of what is wrong with a ray, as found by _ray_status.
+_FINE, _BAD_ORIGIN, _BAD_DIRECTION, _ZERO_DIRECTION = 0, 1, 2, 3
+
+
+@njit(cache=True, parallel=True)
+def _ray_status(origins, directions):
+    """(N,) uint8: what is wrong with each ray, in one pass and without temporaries."""
+    status = np.zeros(len(origins), np.uint8)
+    for i in prange(len(origins)):
+        finite_origin = True
+        finite_direction = True
+        nonzero = False
+        for a in range(3):
+            finite_origin &= np.isfinite(origins[i, a])
+            finite_direction &= np.isfinite(directions[i, a])
+            nonzero |= directions[i, a] != 0
+        if not finite_origin:
+            status[i] = _BAD_ORIGIN
+        elif not finite_direction:
+            status[i] = _BAD_DIRECTION
+        elif not nonzero:
+            status[i] = _ZERO_DIRECTION
+    return status
+
+
+def _as_ray_array(value, name, dtype, count=None):
+    """An (N, 3) C-contiguous array of ``dtype`` (no copy when it already is one)."""
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name} must be an array of real numbers: {error}") from error
+    if array.dtype.kind not in "biuf":
+        raise ValueError(f"{name} must hold real numbers, got dtype {array.dtype}")
+    if array.ndim != 2 or array.shape[1] != 3 or (count is not None and len(array) != count):
+        expected = f"({'N' if count is None else count}, 3)"
+        raise ValueError(f"{name} must have shape {expected}, got {array.shape}")
+    return np.ascontiguousarray(array, dtype=dtype)
+
+
 def prepare_rays(origins, directions, tmin=0.0, tmax=np.inf, dtype=np.float64):
     """Validate a ray batch and return contiguous arrays in one precision.
 
@@ -97,14 +137,18 @@ def prepare_rays(origins, directions, tmin=0.0, tmax=np.inf, dtype=np.float64):
         Naming ``origins``, ``directions``, ``tmin`` or ``tmax``: wrong shape or dtype, NaN or inf
         coordinates, zero-length directions, NaN bounds.
     """
-    origins = as_float_array(origins, "origins", dtype, (None, 3))
-    directions = as_float_array(directions, "directions", dtype, (len(origins), 3))
-    zero = ~np.any(directions != 0, axis=1)
-    if np.any(zero):
-        raise ValueError(
-            f"directions must be non-zero; {int(zero.sum())} ray(s) have zero length, "
-            f"first at index {int(np.argmax(zero))}"
-        )
+    origins = _as_ray_array(origins, "origins", dtype)
+    directions = _as_ray_array(directions, "directions", dtype, len(origins))
+    status = _ray_status(origins, directions)
+    if status.any():
+        bad = np.flatnonzero(status)
+        first = int(bad[0])
+        problem = {
+            _BAD_ORIGIN: "origins must be finite (no NaN or inf)",
+            _BAD_DIRECTION: "directions must be finite (no NaN or inf)",
+            _ZERO_DIRECTION: "directions must be non-zero",
+        }[int(status[first])]
+        raise ValueError(f"{problem}; {len(bad)} bad ray(s), first at index {first}")
     count = len(origins)
     return (
         origins,
