@@ -1,0 +1,101 @@
+"""Camera rays: one ray per pixel centre, in scanline order (row 0 at the top of the image).
+
+The camera looks from ``position`` towards ``look_at``; ``up`` fixes the roll (it need not be
+perpendicular to the view direction, only not parallel to it).  Image x grows to the right of
+the view, image y grows downwards.
+"""
+
+import numpy as np
+
+from raycore.rays import as_float_array
+
+
+def _frame(position, look_at, up):
+    """Camera position and its orthonormal (right, true up, forward) axes, each (3,) float64."""
+    position = as_float_array(position, "position", np.float64, (3,))
+    look_at = as_float_array(look_at, "look_at", np.float64, (3,))
+    up = as_float_array(up, "up", np.float64, (3,))
+    forward = look_at - position
+    if not np.any(forward):
+        raise ValueError("look_at must differ from position")
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, up)
+    norm = np.linalg.norm(right)
+    if norm <= 1e-9 * np.linalg.norm(up):
+        raise ValueError("up must not be zero or parallel to the view direction")
+    right /= norm
+    return position, right, np.cross(right, forward), forward
+
+
+def _pixel_grid(width, height):
+    """Pixel centres in [-1, 1] (x to the right, y upwards), each (H*W,), and the aspect ratio."""
+    for name, value in (("width", width), ("height", height)):
+        if not isinstance(value, (int, np.integer)) or value < 1:
+            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    x = (np.arange(width) + 0.5) / width * 2 - 1
+    y = 1 - (np.arange(height) + 0.5) / height * 2
+    px, py = np.meshgrid(x, y)
+    return px.ravel(), py.ravel(), width / height
+
+
+def perspective_rays(position, look_at, up, fov, width, height):
+    """Pinhole camera rays.
+
+    Parameters
+    ----------
+    position, look_at, up : array_like, shape (3,)
+    fov : float
+        Vertical field of view in degrees, in (0, 180).
+    width, height : int
+        Image size in pixels.
+
+    Returns
+    -------
+    origins, directions : ndarray of float64, shape (height * width, 3)
+        Every origin is ``position``; directions are unit length.
+
+    Raises
+    ------
+    ValueError
+        Naming the argument that is out of range or degenerate.
+    """
+    if not 0 < fov < 180:
+        raise ValueError(f"fov must be in (0, 180) degrees, got {fov!r}")
+    position, right, true_up, forward = _frame(position, look_at, up)
+    px, py, aspect = _pixel_grid(width, height)
+    half = np.tan(np.radians(fov) / 2)
+    directions = (forward + (px * half * aspect)[:, None] * right
+                  + (py * half)[:, None] * true_up)
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    return np.broadcast_to(position, directions.shape).copy(), directions
+
+
+def orthographic_rays(position, look_at, up, view_height, width, height):
+    """Parallel rays from a view plane through ``position``, perpendicular to it.
+
+    Parameters
+    ----------
+    position, look_at, up : array_like, shape (3,)
+    view_height : float
+        Height of the view in scene units (its width follows the image's aspect ratio).
+    width, height : int
+        Image size in pixels.
+
+    Returns
+    -------
+    origins, directions : ndarray of float64, shape (height * width, 3)
+        Origins on the view plane; every direction is the unit view direction.
+
+    Raises
+    ------
+    ValueError
+        Naming the argument that is out of range or degenerate.
+    """
+    if not (np.isfinite(view_height) and view_height > 0):
+        raise ValueError(f"view_height must be positive and finite, got {view_height!r}")
+    position, right, true_up, forward = _frame(position, look_at, up)
+    px, py, aspect = _pixel_grid(width, height)
+    half = view_height / 2
+    origins = (position + (px * half * aspect)[:, None] * right
+               + (py * half)[:, None] * true_up)
+    return origins, np.broadcast_to(forward, origins.shape).copy()
