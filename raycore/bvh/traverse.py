@@ -132,7 +132,7 @@ def _record(hits_t, hits_obj, hits_prim, begin, end, found, t, obj, prim):
     return found + 1
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, inline="always", error_model="numpy")
 def _trace_mesh(mode, ox, oy, oz, dx, dy, dz, tmin, tmax, test, nodes, refs, tri_verts, root,
                 tri0, stack, stack_t, obj, hits_t, hits_obj, hits_prim, begin, end, found):
     """Traverse one mesh's BVH (rows from ``root``, triangles from ``tri0``) with an
