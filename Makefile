@@ -31,6 +31,10 @@ test: $(VENV)/.dev-installed
 bench: $(VENV)/.bench-installed
 	$(BIN)/python -m benchmarks.run
 
+# The committed OpenAPI document, generated from the app (tests/service fail when it drifts).
+openapi: $(VENV)/.dev-installed
+	$(BIN)/raycore openapi --output openapi/openapi.json
+
 lint: $(VENV)/.dev-installed
 	$(BIN)/ruff check .
 

@@ -1,0 +1,48 @@
+"""The ``raycore`` command: ``raycore serve`` runs the HTTP service, ``raycore openapi`` writes
+its OpenAPI document."""
+
+import argparse
+import json
+import sys
+
+
+def _serve(args):
+    import uvicorn
+
+    from service.app import create_app
+
+    uvicorn.run(create_app(), host=args.host, port=args.port, log_level=args.log_level)
+
+
+def _openapi(args):
+    from service.app import create_app
+    from service.config import Settings
+
+    document = json.dumps(create_app(Settings(demo=False)).openapi(), indent=2) + "\n"
+    if args.output == "-":
+        sys.stdout.write(document)
+    else:
+        with open(args.output, "w", encoding="utf-8") as file:
+            file.write(document)
+
+
+def main(argv=None):
+    """Parse ``argv`` (default: the command line) and run the subcommand."""
+    parser = argparse.ArgumentParser(prog="raycore", description="Ray casting library and service")
+    commands = parser.add_subparsers(dest="command", required=True)
+    serve = commands.add_parser(
+        "serve", help="serve the HTTP API (settings from RAYCORE_* environment variables)")
+    serve.add_argument("--host", default="127.0.0.1")
+    serve.add_argument("--port", type=int, default=8000)
+    serve.add_argument("--log-level", default="info",
+                       choices=["critical", "error", "warning", "info", "debug"])
+    serve.set_defaults(run=_serve)
+    openapi = commands.add_parser("openapi", help="write the HTTP API's OpenAPI document")
+    openapi.add_argument("--output", default="-", help="file to write, or - for stdout")
+    openapi.set_defaults(run=_openapi)
+    args = parser.parse_args(argv)
+    args.run(args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,111 @@
+"""The FastAPI app: routers, error handlers, the body size limit, and startup."""
+
+import logging
+import threading
+from contextlib import asynccontextmanager
+from importlib.metadata import version
+
+import anyio
+from fastapi import FastAPI, HTTPException
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+
+from service.config import Settings, load_settings
+from service.demo import load_demo
+from service.errors import ClientError
+from service.routes import health, meshes, scenes
+from service.runtime import Runtime
+from service.store import Store
+
+logger = logging.getLogger("raycore.service")
+
+DESCRIPTION = """Ray queries and renders over HTTP, answered by `raycore.Scene`.
+
+Upload meshes (`POST /v1/meshes`), build scenes from JSON (`POST /v1/scenes`), then cast ray
+batches at them (`POST /v1/scenes/{id}/intersect`, JSON or .npy both ways) or render PNGs
+(`POST /v1/scenes/{id}/render`).  Scene and mesh ids are content hashes; `demo` names a built-in
+scene.  Errors are answered as `{"detail": "..."}` with a 4xx status.
+"""
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """Build the app.
+
+    Parameters
+    ----------
+    settings : Settings, optional
+        Defaults to :func:`service.config.load_settings` (the environment).
+    """
+    settings = load_settings() if settings is None else settings
+    app = FastAPI(title="raycore", version=version("raycore"), description=DESCRIPTION,
+                  lifespan=_lifespan)
+    app.state.runtime = Runtime(settings, Store(settings.store_bytes))
+    app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    app.add_exception_handler(ClientError, _client_error)
+    app.add_exception_handler(RequestValidationError, _invalid_request)
+    app.add_exception_handler(Exception, _unexpected)
+    for module in (health, meshes, scenes):
+        app.include_router(module.router)
+    return app
+
+
+@asynccontextmanager
+async def _lifespan(app):
+    state = app.state.runtime
+    state.limiter = anyio.CapacityLimiter(state.settings.compute_slots)
+    if state.settings.demo:
+        # in the background, so that /healthz answers while kernels load
+        threading.Thread(target=load_demo, args=(state,), name="raycore-demo", daemon=True).start()
+    else:
+        state.ready.set()
+    yield
+
+
+class BodyLimit:
+    """ASGI middleware: 413 for bodies over ``max_bytes``, by Content-Length or as they stream."""
+
+    def __init__(self, app, max_bytes):
+        self.app = app
+        self.max_bytes = max_bytes
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        declared = dict(scope["headers"]).get(b"content-length", b"0")
+        if declared.isdigit() and int(declared) > self.max_bytes:
+            detail = f"the body has {int(declared)} bytes; the limit is {self.max_bytes}"
+            await JSONResponse({"detail": detail}, status_code=413)(scope, receive, send)
+            return
+        received = 0
+
+        async def limited_receive():
+            nonlocal received
+            message = await receive()
+            received += len(message.get("body", b""))
+            if received > self.max_bytes:
+                # answered by the app's HTTPException handler, whoever is reading the body
+                raise HTTPException(413, f"the body has over {self.max_bytes} bytes, the limit")
+            return message
+
+        await self.app(scope, limited_receive, send)
+
+
+async def _client_error(request, error):
+    return JSONResponse({"detail": str(error)}, status_code=error.status)
+
+
+async def _invalid_request(request, error):
+    # without the offending input: it can be huge, or NaN, which JSON cannot carry
+    problems = [{"loc": list(problem["loc"]), "msg": problem["msg"], "type": problem["type"]}
+                for problem in error.errors()]
+    detail = "; ".join(".".join(map(str, problem["loc"])) + ": " + problem["msg"]
+                       for problem in problems[:3])
+    if len(problems) > 3:
+        detail += f" (and {len(problems) - 3} more)"
+    return JSONResponse({"detail": detail, "errors": problems[:100]}, status_code=422)
+
+
+async def _unexpected(request, error):
+    logger.error("unhandled error on %s %s", request.method, request.url.path, exc_info=error)
+    return JSONResponse({"detail": "internal server error"}, status_code=500)

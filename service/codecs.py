@@ -1,0 +1,146 @@
+"""Encoding at the service's edge: rays in (JSON or .npy), query results out (JSON or .npy), PNG.
+
+A query result is a dict of named columns (NumPy arrays with one row per ray, or per hit for
+``all``), so that JSON and .npy answers carry the same numbers.
+"""
+
+import io
+import json
+
+import numpy as np
+
+from service.errors import BadRequest, ClientError
+
+NPY = "application/x-npy"
+
+#: .npy result columns: ids fit in int32 (stored triangles and objects are limited), which
+#: keeps binary answers small.
+_ID_DTYPE = np.dtype("<i4")
+
+
+def accepts_npy(accept):
+    """Whether an Accept header lists .npy."""
+    return any(part.split(";")[0].strip().lower() == NPY for part in accept.split(","))
+
+
+def read_npy(body):
+    """Parse an .npy body into an array of floats without copying it, trusting nothing.
+
+    Only the 1.0 and 2.0 formats; the header is parsed as a literal (never unpickled), object and
+    structured dtypes are refused, and the body's length must match the announced shape.
+
+    Raises
+    ------
+    BadRequest
+        Saying what does not match.
+    """
+    stream = io.BytesIO(body)
+    try:
+        version = np.lib.format.read_magic(stream)
+        if version == (1, 0):
+            shape, fortran_order, dtype = np.lib.format.read_array_header_1_0(stream)
+        elif version == (2, 0):
+            shape, fortran_order, dtype = np.lib.format.read_array_header_2_0(stream)
+        else:
+            raise ValueError(f"format version {version} is not supported (1.0 or 2.0)")
+    except ValueError as error:
+        raise BadRequest(f"the body is not a valid .npy file: {error}") from error
+    if dtype.hasobject or dtype.kind != "f" or dtype.itemsize not in (4, 8):
+        raise BadRequest(f"the .npy array must hold float32 or float64, got dtype {dtype.str}")
+    count = int(np.prod(shape, dtype=np.int64))
+    data = len(body) - stream.tell()
+    if data != count * dtype.itemsize:
+        raise BadRequest(f"the .npy header announces shape {shape} of {dtype.str} "
+                         f"({count * dtype.itemsize} bytes), the body holds {data} bytes of data")
+    array = np.frombuffer(body, dtype=dtype, count=count, offset=stream.tell())
+    return array.reshape(shape, order="F" if fortran_order else "C")
+
+
+def write_npy(array):
+    """Bytes of ``array`` as an .npy file."""
+    stream = io.BytesIO()
+    np.lib.format.write_array(stream, array, allow_pickle=False)
+    return stream.getvalue()
+
+
+def rays_from_npy(array, tmin, tmax):
+    """Split an (N, 6) or (N, 8) ray array (origin, direction[, tmin, tmax]) into columns.
+
+    ``tmin``/``tmax`` (from the URL) apply to (N, 6) rays; (N, 8) rays carry their own.
+
+    Returns
+    -------
+    origins, directions : ndarray, shape (N, 3)
+    tmin, tmax : float or ndarray, shape (N,)
+    """
+    if array.ndim != 2 or array.shape[1] not in (6, 8):
+        raise ClientError(f"the .npy rays must have shape (N, 6) or (N, 8), got {array.shape}")
+    if array.shape[1] == 8:
+        if tmin is not None or tmax is not None:
+            raise ClientError("(N, 8) rays carry tmin and tmax: leave them out of the URL")
+        return array[:, :3], array[:, 3:6], array[:, 6], array[:, 7]
+    return (array[:, :3], array[:, 3:6], 0.0 if tmin is None else tmin,
+            np.inf if tmax is None else tmax)
+
+
+def rays_from_json(request):
+    """Origins, directions, tmin and tmax of an IntersectRequest (null tmax: no limit)."""
+    tmax = request.tmax
+    if tmax is None:
+        tmax = np.inf
+    elif isinstance(tmax, list):
+        tmax = [np.inf if value is None else value for value in tmax]
+    return request.origins, request.directions, request.tmin, tmax
+
+
+def result_columns(query, result):
+    """Named columns of a query's result (see :func:`service.routes.scenes.run_query`)."""
+    if query == "any":
+        return {"occluded": result}
+    if query == "count":
+        return {"count": result}
+    if query == "all":
+        return {"ray_index": result.ray_index, "t": result.t, "geom_id": result.geom_id,
+                "prim_id": result.prim_id, "counts": result.counts}
+    columns = {"t": result.t, "geom_id": result.geom_id, "prim_id": result.prim_id}
+    for name in ("uv", "normal", "point"):
+        if getattr(result, name) is not None:
+            columns[name] = getattr(result, name)
+    return columns
+
+
+def columns_to_json(columns):
+    """JSON bytes of result columns: null for a miss's t (inf) and surface data (NaN)."""
+    answer = {}
+    for name, column in columns.items():
+        values = column.tolist()
+        if column.dtype.kind == "f":
+            finite = np.isfinite(column.reshape(len(column), -1)).all(axis=1)
+            for row in np.flatnonzero(~finite):
+                values[row] = None
+        answer[name] = values
+    return json.dumps(answer, separators=(",", ":")).encode()
+
+
+def columns_to_npy(columns):
+    """.npy bytes of result columns as one structured array (``counts`` of ``all`` is left out:
+    it is ``np.bincount(ray_index)``); ids as int32."""
+    columns = {name: column for name, column in columns.items() if name != "counts"}
+    length = len(next(iter(columns.values())))
+    fields = []
+    for name, column in columns.items():
+        dtype = _ID_DTYPE if column.dtype.kind in "iu" else column.dtype.newbyteorder("<")
+        fields.append((name, dtype, column.shape[1:]))
+    table = np.empty(length, dtype=fields)
+    for name, column in columns.items():
+        table[name] = column
+    return write_npy(table)
+
+
+def png(image):
+    """PNG bytes of an (H, W, 3) uint8 image (fast compression: renders are sent once)."""
+    from PIL import Image
+
+    stream = io.BytesIO()
+    Image.fromarray(image).save(stream, format="PNG", compress_level=1)
+    return stream.getvalue()

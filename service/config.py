@@ -1,0 +1,73 @@
+"""Service settings: request limits and the scene store's budget.
+
+Read from the environment once, by :func:`load_settings`, when the app is created; tests build
+:class:`Settings` directly.
+"""
+
+import os
+from dataclasses import dataclass, fields
+
+MIB = 2**20
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Limits of what one request may ask for, and of the memory the service keeps.
+
+    Attributes
+    ----------
+    max_rays : int
+        Rays per intersect request.
+    max_body_bytes : int
+        Bytes of a request body (the default fits 2M rays as float64 (N, 8) .npy).
+    max_triangles : int
+        Triangles stored per scene and per uploaded mesh (instances share their mesh's).
+    max_render_pixels : int
+        width * height of a render.
+    store_bytes : int
+        Memory budget of the scene and mesh store; least recently used entries go first.
+    compute_slots : int
+        Requests that run geometry work at once.  Each query already uses every core, so more
+        slots only add memory.
+    demo : bool
+        Build the demo scene (id ``demo``) at startup.
+    """
+
+    max_rays: int = 2**21
+    max_body_bytes: int = 136 * MIB
+    max_triangles: int = 4_000_000
+    max_render_pixels: int = 4096 * 4096
+    store_bytes: int = 2048 * MIB
+    compute_slots: int = 2
+    demo: bool = True
+
+
+def load_settings(environ=None):
+    """Settings from ``RAYCORE_<NAME>`` environment variables (e.g. ``RAYCORE_MAX_RAYS``).
+
+    Parameters
+    ----------
+    environ : mapping, optional
+        Defaults to ``os.environ``.
+
+    Raises
+    ------
+    ValueError
+        Naming the variable whose value is not a positive integer (or a boolean for ``DEMO``).
+    """
+    environ = os.environ if environ is None else environ
+    values = {}
+    for field in fields(Settings):
+        name = f"RAYCORE_{field.name.upper()}"
+        if name not in environ:
+            continue
+        raw = environ[name].strip().lower()
+        if field.type is bool:
+            if raw not in ("0", "1", "true", "false"):
+                raise ValueError(f"{name} must be true or false, got {environ[name]!r}")
+            values[field.name] = raw in ("1", "true")
+            continue
+        if not raw.isdigit() or int(raw) < 1:
+            raise ValueError(f"{name} must be a positive integer, got {environ[name]!r}")
+        values[field.name] = int(raw)
+    return Settings(**values)

@@ -1,0 +1,54 @@
+"""What the routes share: settings, the store, and the slots for geometry work."""
+
+import threading
+from dataclasses import dataclass, field
+from functools import partial
+
+import anyio
+from fastapi import Request
+
+from service.config import Settings
+from service.errors import NotFound
+from service.store import Store
+
+
+@dataclass
+class Runtime:
+    """Per-app state, created by :func:`service.app.create_app`.
+
+    ``limiter`` is made at startup, inside the event loop that it belongs to.
+    """
+
+    settings: Settings
+    store: Store
+    ready: threading.Event = field(default_factory=threading.Event)
+    limiter: anyio.CapacityLimiter | None = None
+
+    async def compute(self, function, *args):
+        """Run CPU work in a worker thread, off the event loop, one of ``compute_slots`` at once.
+
+        Numba kernels hold the GIL while they run (they are not compiled with ``nogil``): the
+        loop still stalls during a kernel, but parses, encodes and serves between them.
+        """
+        return await anyio.to_thread.run_sync(partial(function, *args), limiter=self.limiter)
+
+    def get(self, kind, key):
+        """A stored mesh or scene; NotFound when there is none under ``key``."""
+        entry = self.store.get(kind, key)
+        if entry is None:
+            raise _not_found(kind, key)
+        return entry
+
+    def delete(self, kind, key):
+        """Remove a stored mesh or scene; NotFound when there is none under ``key``."""
+        if not self.store.delete(kind, key):
+            raise _not_found(kind, key)
+
+
+def _not_found(kind, key):
+    return NotFound(f"no {kind} {key!r} (it may have been evicted: upload it again)")
+
+
+def runtime(request: Request) -> Runtime:
+    """FastAPI dependency: the app's Runtime."""
+    return request.app.state.runtime
