@@ -9,7 +9,7 @@ reference-counts every array it unpacks, and those atomic updates, contended bet
 cost more than the traversal itself.
 
 Robustness (DESIGN.md, "Numerics"): a watertight triangle test behind a plain slab test still
-leaks, so the box test is conservative (Ize 2013: the far distance is scaled by 1 + 2γ(3)) and
+leaks, so the box test is conservative (Ize 2013: the far distance is scaled by 1 + 2γ(n)) and
 NaN-safe (a 0·inf slab distance, from a ray lying in a face plane, never narrows the interval).
 """
 
@@ -35,16 +35,22 @@ STACK_SIZE = MAX_DEPTH + 2
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _ray_setup(ox, dx, dy, dz):
-    """Reciprocal direction, near-plane offsets (0: lo, 3: hi) and the box padding factor."""
+    """Reciprocal direction for near planes and padded for far planes, and the near-plane
+    offsets (0: lo, 3: hi).
+
+    The far distance is padded by 1 + 2γ(5): the γ(3) of Ize's analysis for the reciprocal, the
+    subtraction and the product, plus two roundings for folding the pad into the reciprocal.
+    """
     ix = like(ox, 1) / dx
     iy = like(ox, 1) / dy
     iz = like(ox, 1) / dz
-    pad = like(ox, 1) + like(ox, 2) * gamma(3, ox)
-    return ix, iy, iz, 0 if ix >= 0 else 3, 0 if iy >= 0 else 3, 0 if iz >= 0 else 3, pad
+    pad = like(ox, 1) + like(ox, 2) * gamma(5, ox)
+    return (ix, iy, iz, ix * pad, iy * pad, iz * pad,
+            0 if ix >= 0 else 3, 0 if iy >= 0 else 3, 0 if iz >= 0 else 3)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _enter(nodes, row, base, ox, oy, oz, ix, iy, iz, nx, ny, nz, tmin, tmax, pad):
+def _enter(nodes, row, base, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, tmin, tmax):
     """Entry distance of the ray into child box ``base`` (0 or 6) of node ``row``; inf on a miss.
 
     Written so that a NaN slab distance (0·inf) leaves the interval unchanged.
@@ -54,19 +60,19 @@ def _enter(nodes, row, base, ox, oy, oz, ix, iy, iz, nx, ny, nz, tmin, tmax, pad
     t = (nodes[row, base + nx] - ox) * ix
     if t > t_near:
         t_near = t
-    t = (nodes[row, base + 3 - nx] - ox) * ix * pad
+    t = (nodes[row, base + 3 - nx] - ox) * fx
     if t < t_far:
         t_far = t
     t = (nodes[row, base + 1 + ny] - oy) * iy
     if t > t_near:
         t_near = t
-    t = (nodes[row, base + 4 - ny] - oy) * iy * pad
+    t = (nodes[row, base + 4 - ny] - oy) * fy
     if t < t_far:
         t_far = t
     t = (nodes[row, base + 2 + nz] - oz) * iz
     if t > t_near:
         t_near = t
-    t = (nodes[row, base + 5 - nz] - oz) * iz * pad
+    t = (nodes[row, base + 5 - nz] - oz) * fz
     if t < t_far:
         t_far = t
     if t_near <= t_far:
@@ -75,8 +81,8 @@ def _enter(nodes, row, base, ox, oy, oz, ix, iy, iz, nx, ny, nz, tmin, tmax, pad
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _descend(nodes, refs, row, row_base, ox, oy, oz, ix, iy, iz, nx, ny, nz, tmin, tmax, pad,
-             stack, stack_t, top):
+def _descend(nodes, refs, row, row_base, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, tmin,
+             tmax, stack, stack_t, top):
     """Test both children of ``row``: return the nearer internal child to visit next (-1 if
     none), pushing the farther one, and the children that are leaves, nearest first.
 
@@ -85,8 +91,8 @@ def _descend(nodes, refs, row, row_base, ox, oy, oz, ix, iy, iz, nx, ny, nz, tmi
     next_row, top, first0, count0, first1, count1
         Leaf ranges have count 0 where absent.
     """
-    t_left = _enter(nodes, row, 0, ox, oy, oz, ix, iy, iz, nx, ny, nz, tmin, tmax, pad)
-    t_right = _enter(nodes, row, 6, ox, oy, oz, ix, iy, iz, nx, ny, nz, tmin, tmax, pad)
+    t_left = _enter(nodes, row, 0, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, tmin, tmax)
+    t_right = _enter(nodes, row, 6, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, tmin, tmax)
     near = 0 if t_left <= t_right else 1
     next_row = -1
     first0 = count0 = first1 = count1 = 0
@@ -141,7 +147,7 @@ def _trace_mesh(mode, ox, oy, oz, dx, dy, dz, tmin, tmax, test, nodes, refs, tri
     Returns ``(t, prim, u, v, found)``: the closest hit below ``tmax`` (``prim`` is -1 if none;
     in ANY mode the first found) and, in ALL mode, the running hit count.
     """
-    ix, iy, iz, nx, ny, nz, pad = _ray_setup(ox, dx, dy, dz)
+    ix, iy, iz, fx, fy, fz, nx, ny, nz = _ray_setup(ox, dx, dy, dz)
     kx, ky, kz, sx, sy, sz = watertight_setup(dx, dy, dz)
     best_t = tmax
     best_prim = -1
@@ -150,7 +156,7 @@ def _trace_mesh(mode, ox, oy, oz, dx, dy, dz, tmin, tmax, test, nodes, refs, tri
     row = root
     while row >= 0:
         next_row, top, first0, count0, first1, count1 = _descend(
-            nodes, refs, row, root, ox, oy, oz, ix, iy, iz, nx, ny, nz, tmin, best_t, pad,
+            nodes, refs, row, root, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, tmin, best_t,
             stack, stack_t, top)
         for leaf in range(2):
             first = tri0 + (first0 if leaf == 0 else first1)
@@ -227,7 +233,7 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
         ox, oy, oz = origins[i, 0], origins[i, 1], origins[i, 2]
         dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
         t_lo = tmin[i]
-        ix, iy, iz, nx, ny, nz, pad = _ray_setup(ox, dx, dy, dz)
+        ix, iy, iz, fx, fy, fz, nx, ny, nz = _ray_setup(ox, dx, dy, dz)
         begin = offsets[i] if store else 0
         end = offsets[i + 1] if store else 0
 
@@ -292,8 +298,8 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
                 if row < 0:
                     break
             next_row, top, first0, count0, first1, count1 = _descend(
-                top_nodes, top_refs, row, 0, ox, oy, oz, ix, iy, iz, nx, ny, nz, t_lo, best_t,
-                pad, stack, stack_t, top)
+                top_nodes, top_refs, row, 0, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, t_lo,
+                best_t, stack, stack_t, top)
         if mode == ALL:
             out_obj[i] = found
             continue
