@@ -6,6 +6,7 @@ A query result is a dict of named columns (NumPy arrays with one row per ray, or
 
 import io
 import json
+import tokenize
 
 import numpy as np
 
@@ -43,7 +44,8 @@ def read_npy(body):
             shape, fortran_order, dtype = np.lib.format.read_array_header_2_0(stream)
         else:
             raise ValueError(f"format version {version} is not supported (1.0 or 2.0)")
-    except ValueError as error:
+    # numpy's header parser lets the tokenizer's and literal_eval's errors through
+    except (ValueError, TypeError, SyntaxError, tokenize.TokenError) as error:
         raise BadRequest(f"the body is not a valid .npy file: {error}") from error
     if dtype.hasobject or dtype.kind != "f" or dtype.itemsize not in (4, 8):
         raise BadRequest(f"the .npy array must hold float32 or float64, got dtype {dtype.str}")

@@ -144,6 +144,8 @@ GOOD = np.hstack(rays(10)).astype(np.float32)
     (npy_bytes(GOOD) + b"\0" * 4, 400, "body holds"),
     (b"\x93NUMPY\x01\x00\x10\x00{'descr': 'O'}  \n", 400, "not a valid .npy"),
     (b"not numpy at all", 400, "not a valid .npy"),
+    # regression: numpy's header parser raised tokenize.TokenError (a 500) on unbalanced brackets
+    (b"\x93NUMPY\x01\x00\x10\x00{'shape': (1,  \n", 400, "not a valid .npy"),
     (npy_bytes(GOOD.astype(np.int32)), 400, "float32 or float64"),
     (npy_bytes(GOOD.astype(np.float16)), 400, "float32 or float64"),
     (npy_bytes(np.zeros(10, dtype=[("x", "<f4")])), 400, "float32 or float64"),

@@ -1,0 +1,20 @@
+"""Settings from the environment."""
+
+import pytest
+
+from service.config import Settings, load_settings
+
+
+def test_defaults_and_overrides():
+    assert load_settings({}) == Settings()
+    settings = load_settings({"RAYCORE_MAX_RAYS": "10", "RAYCORE_DEMO": "false", "HOME": "/"})
+    assert settings.max_rays == 10 and settings.demo is False
+
+
+@pytest.mark.parametrize(("name", "value"), [
+    ("RAYCORE_MAX_RAYS", "ten"), ("RAYCORE_STORE_BYTES", "0"), ("RAYCORE_MAX_RAYS", "-5"),
+    ("RAYCORE_DEMO", "maybe"),
+])
+def test_bad_values_name_the_variable(name, value):
+    with pytest.raises(ValueError, match=name):
+        load_settings({name: value})

@@ -1,0 +1,51 @@
+"""Health, readiness and the demo scene."""
+
+import time
+from dataclasses import replace
+
+import numpy as np
+import trimesh
+from fastapi.testclient import TestClient
+
+from service.app import create_app
+from service.demo import DEMO_CAMERA, demo_spec, torus
+
+from .data import SETTINGS
+from .test_render_png import decode
+
+
+def test_healthz_and_readyz_without_demo(client):
+    assert client.get("/healthz").json() == {"status": "ok"}
+    assert client.get("/readyz").json() == {"status": "ready"}
+
+
+def wait_ready(client, timeout=600):
+    deadline = time.monotonic() + timeout
+    while (response := client.get("/readyz")).status_code == 503:
+        assert response.json() == {"status": "starting"}
+        assert time.monotonic() < deadline, "the demo scene did not load"
+        time.sleep(0.1)
+    assert response.json() == {"status": "ready"}
+
+
+def test_demo_scene_is_served_and_renders():
+    settings = replace(SETTINGS, demo=True, max_render_pixels=DEMO_CAMERA["width"]
+                       * DEMO_CAMERA["height"])
+    with TestClient(create_app(settings)) as client:
+        assert client.get("/healthz").status_code == 200
+        wait_ready(client)
+        info = client.get("/v1/scenes/demo").json()
+        assert info["objects"] == len(demo_spec().objects) and info["triangles"] > 2000
+        assert client.get(f"/v1/scenes/{info['id']}").json() == info
+        image = decode(client.post("/v1/scenes/demo/render", json={"camera": DEMO_CAMERA}))
+        # the floor plane fills the lower image; every object shows in its own colour
+        ids = decode(client.post("/v1/scenes/demo/render",
+                                 json={"camera": DEMO_CAMERA, "shading": "id"}))
+        assert np.all(image[-1] != 0)
+        assert len(np.unique(ids.reshape(-1, 3), axis=0)) == info["objects"] + 1  # + background
+
+
+def test_torus_is_closed_and_consistently_wound():
+    vertices, faces = torus()
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
