@@ -2,14 +2,7 @@
 concurrent requests, stop."""
 
 import io
-import os
-import signal
-import socket
-import subprocess
-import sys
-import time
 from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import httpx
 import numpy as np
@@ -19,45 +12,16 @@ from PIL import Image
 
 from raycore import Scene
 from raycore.mesh import load_trimesh
+from service.process import running_service
 
 from .data import rays
 
-STARTUP_SECONDS = 600  # a fresh process may compile kernels whose cache is stale
-
-
-def free_port():
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
 
 @pytest.fixture(scope="module")
-def server(tmp_path_factory):
+def server():
     """Base URL of a running service; stopped (and checked to stop cleanly) afterwards."""
-    port = free_port()
-    log = tmp_path_factory.mktemp("server") / "server.log"
-    command = [str(Path(sys.executable).with_name("raycore")), "serve", "--host", "127.0.0.1",
-               "--port", str(port), "--log-level", "warning"]
-    with open(log, "wb") as output:
-        process = subprocess.Popen(command, stdout=output, stderr=subprocess.STDOUT,
-                                   env={**os.environ, "RAYCORE_MAX_RAYS": "100000"})
-    url = f"http://127.0.0.1:{port}"
-    try:
-        deadline = time.monotonic() + STARTUP_SECONDS
-        while True:
-            assert process.poll() is None, log.read_text()
-            assert time.monotonic() < deadline, log.read_text()
-            try:
-                if httpx.get(f"{url}/readyz").status_code == 200:
-                    break
-            except httpx.TransportError:
-                pass  # not listening yet
-            time.sleep(0.2)
+    with running_service({"RAYCORE_MAX_RAYS": "100000"}) as url:
         yield url
-    finally:
-        process.send_signal(signal.SIGINT)
-        returncode = process.wait(timeout=60)
-    assert returncode == 0, log.read_text()
 
 
 @pytest.fixture(scope="module")
