@@ -1,0 +1,1 @@
+"""Ray intersection kernels, one module per shape; :mod:`.analytic` gathers the analytic ones."""
