@@ -27,13 +27,13 @@ RESULTS = Path(__file__).resolve().parent / "results"
 TRIMESH_SAMPLE = {"camera": 2000, "random": 300}
 
 
-def best_time(function, repeats=3):
-    """Smallest wall time of ``repeats`` calls, and the last result."""
+def best_time(function, *args, repeats=3):
+    """Smallest wall time of ``repeats`` calls of ``function(*args)``, and the last result."""
     best = np.inf
     result = None
     for _ in range(repeats):
         start = time.perf_counter()
-        result = function()
+        result = function(*args)
         best = min(best, time.perf_counter() - start)
     return best, result
 
@@ -56,7 +56,7 @@ def bench_mesh(name, vertices, faces, ray_count, camera_size):
     for dtype in ("float32", "float64"):
         scene = Scene(dtype=dtype)
         scene.add_mesh(vertices, faces)
-        seconds, _ = best_time(lambda scene=scene: scene.build(), repeats=2)
+        seconds, _ = best_time(scene.build, repeats=2)
         scenes[dtype] = scene
         report["build_s"][f"raycore-{dtype}"] = seconds
         report["bytes_per_triangle"][f"raycore-{dtype}"] = scene.stats()["bytes"] / len(faces)
@@ -76,20 +76,20 @@ def bench_mesh(name, vertices, faces, ray_count, camera_size):
         origins32 = origins.astype(np.float32)
         directions32 = directions.astype(np.float32)
         row = {"mrays_s": {}, "agreement_with_embree": {}}
-        seconds, (t_ref, prim_ref) = best_time(
-            lambda: anchors["embreex"].closest(origins32, directions32), repeats=1)
+        seconds, (t_ref, prim_ref) = best_time(anchors["embreex"].closest, origins32,
+                                               directions32, repeats=1)
         row["mrays_s"]["embreex"] = len(origins) / seconds / 1e6
-        seconds, _ = best_time(lambda: anchors["open3d"].closest(origins32, directions32))
+        seconds, _ = best_time(anchors["open3d"].closest, origins32, directions32)
         row["mrays_s"]["open3d"] = len(origins) / seconds / 1e6
         sample = TRIMESH_SAMPLE[kind]
-        seconds, _ = best_time(
-            lambda: anchors["trimesh"].closest(origins[:sample], directions[:sample]), repeats=1)
+        seconds, _ = best_time(anchors["trimesh"].closest, origins[:sample], directions[:sample],
+                               repeats=1)
         row["mrays_s"]["trimesh"] = sample / seconds / 1e6
         for dtype, scene in scenes.items():
             o = origins32 if dtype == "float32" else origins
             d = directions32 if dtype == "float32" else directions
             scene.intersect(o[:1000], d[:1000])  # compile or load the kernels outside the timing
-            seconds, hits = best_time(lambda scene=scene, o=o, d=d: scene.intersect(o, d))
+            seconds, hits = best_time(scene.intersect, o, d)
             row["mrays_s"][f"raycore-{dtype}"] = len(origins) / seconds / 1e6
             both = np.isfinite(hits.t) & np.isfinite(t_ref)
             row["agreement_with_embree"][dtype] = {

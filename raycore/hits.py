@@ -4,7 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: Surface fields a closest-hit query can be asked for, besides t and the ids that it always returns.
+#: Surface fields a closest-hit query can be asked for, besides t and the ids it always returns.
 SURFACE_FIELDS = ("uv", "normal", "point")
 
 

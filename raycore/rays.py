@@ -47,7 +47,7 @@ def as_float_array(value, name, dtype, shape=None):
         raise ValueError(f"{name} must hold real numbers, got dtype {array.dtype}")
     if shape is not None and (
         array.ndim != len(shape)
-        or any(want is not None and got != want for got, want in zip(array.shape, shape))
+        or any(want not in (None, got) for got, want in zip(array.shape, shape, strict=True))
     ):
         expected = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
         raise ValueError(f"{name} must have shape {expected}, got {array.shape}")

@@ -74,8 +74,10 @@ def _half_areas(lo, hi):
     return extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] + extent[:, 2] * extent[:, 0]
 
 
-def build_bvh(lo, hi, params=BuildParams()):
-    """Build a flat BVH over primitives with bounds ``lo``, ``hi`` (float64, shape (F, 3))."""
+def build_bvh(lo, hi, params=None):
+    """Build a flat BVH over primitives with bounds ``lo``, ``hi`` (float64, shape (F, 3)),
+    with :class:`BuildParams` (defaults when None)."""
+    params = params or BuildParams()
     lo = np.ascontiguousarray(lo, dtype=np.float64)
     hi = np.ascontiguousarray(hi, dtype=np.float64)
     if len(lo) == 0:
