@@ -28,14 +28,19 @@ def _frame(position, look_at, up):
 
 
 def _pixel_grid(width, height):
-    """Pixel centres in [-1, 1] (x to the right, y upwards), each (H*W,), and the aspect ratio."""
+    """Pixel centres in [-1, 1]: x of each column (to the right), y of each row (upwards)."""
     for name, value in (("width", width), ("height", height)):
         if not isinstance(value, (int, np.integer)) or value < 1:
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
     x = (np.arange(width) + 0.5) / width * 2 - 1
     y = 1 - (np.arange(height) + 0.5) / height * 2
-    px, py = np.meshgrid(x, y)
-    return px.ravel(), py.ravel(), width / height
+    return x, y
+
+
+def _plane_points(center, right, up, across, rise):
+    """(H*W, 3) points ``center + across[w] * right + rise[h] * up`` in scanline order."""
+    row = center + across[:, None] * right  # (W, 3)
+    return (row[None] + (rise[:, None] * up)[:, None]).reshape(-1, 3)
 
 
 def perspective_rays(position, look_at, up, fov, width, height):
@@ -62,11 +67,13 @@ def perspective_rays(position, look_at, up, fov, width, height):
     if not 0 < fov < 180:
         raise ValueError(f"fov must be in (0, 180) degrees, got {fov!r}")
     position, right, true_up, forward = _frame(position, look_at, up)
-    px, py, aspect = _pixel_grid(width, height)
-    half = np.tan(np.radians(fov) / 2)
-    directions = (forward + (px * half * aspect)[:, None] * right
-                  + (py * half)[:, None] * true_up)
-    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    x, y = _pixel_grid(width, height)
+    # offsets on the image plane at distance 1, per column and per row
+    across = x * np.tan(np.radians(fov) / 2) * width / height
+    rise = y * np.tan(np.radians(fov) / 2)
+    directions = _plane_points(forward, right, true_up, across, rise)
+    # the axes are orthonormal: |forward + a right + b up|^2 = 1 + a^2 + b^2
+    directions *= (1 / np.sqrt(1 + across[None, :] ** 2 + rise[:, None] ** 2)).reshape(-1, 1)
     return np.broadcast_to(position, directions.shape).copy(), directions
 
 
@@ -94,8 +101,8 @@ def orthographic_rays(position, look_at, up, view_height, width, height):
     if not (np.isfinite(view_height) and view_height > 0):
         raise ValueError(f"view_height must be positive and finite, got {view_height!r}")
     position, right, true_up, forward = _frame(position, look_at, up)
-    px, py, aspect = _pixel_grid(width, height)
-    half = view_height / 2
-    origins = (position + (px * half * aspect)[:, None] * right
-               + (py * half)[:, None] * true_up)
+    x, y = _pixel_grid(width, height)
+    across = x * view_height / 2 * width / height
+    rise = y * view_height / 2
+    origins = _plane_points(position, right, true_up, across, rise)
     return origins, np.broadcast_to(forward, origins.shape).copy()

@@ -9,17 +9,54 @@ near the origin where units in the last place become tiny.
 """
 
 import numpy as np
+from numba import njit, prange, types
+from numba.extending import overload
 
+from raycore._fp import like
 from raycore.rays import as_float_array
 
 #: Per precision: (coordinates below this use the absolute offset, absolute offset per unit
 #: normal, units in the last place per unit normal).  The float32 values are Wächter & Binder's;
 #: the float64 ones keep the same ratio to the precision's epsilon (2**-29 times smaller).
 _CONSTANTS = {
-    np.float32: (1.0 / 32.0, 2.0**-16, 256),
-    np.float64: (1.0 / 32.0, 2.0**-45, 256),
+    np.float32: (1.0 / 32.0, 2.0**-16, 256.0),
+    np.float64: (1.0 / 32.0, 2.0**-45, 256.0),
 }
-_INT_OF = {np.float32: np.int32, np.float64: np.int64}
+
+
+def step_ulps(x, steps):
+    """``x`` moved by ``steps`` units in the last place, away from zero for positive ``steps``
+    (for finite ``x`` away from the largest floats; usable inside kernels)."""
+    bits = np.asarray(x).view(np.int32 if isinstance(x, np.float32) else np.int64)
+    return (bits + steps).view(type(x))[()]
+
+
+@overload(step_ulps, inline="always")
+def _step_ulps(x, steps):
+    if x == types.float32:
+        def impl(x, steps):
+            return np.int32(np.float32(x).view(np.int32) + steps).view(np.float32)
+    else:
+        def impl(x, steps):
+            return np.int64(np.float64(x).view(np.int64) + steps).view(np.float64)
+    return impl
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _offset(points, normals, directions, reach, near, float_scale, int_scale, out):
+    for i in prange(len(points)):
+        facing = (normals[i, 0] * directions[i, 0] + normals[i, 1] * directions[i, 1]
+                  + normals[i, 2] * directions[i, 2])
+        side = like(near, -1.0) if facing < 0 else like(near, 1.0)
+        for k in range(3):
+            n = side * normals[i, k]
+            p = like(near, points[i, k] + reach[i] * n)
+            if abs(p) < near:
+                out[i, k] = p + float_scale * n
+            else:
+                # a negative float grows in magnitude as its bit pattern grows: step the other way
+                steps = int(int_scale * n)
+                out[i, k] = step_ulps(p, -steps if p < 0 else steps)
 
 
 def offset_ray_origin(points, normals, directions, *, error=None):
@@ -35,10 +72,11 @@ def offset_ray_origin(points, normals, directions, *, error=None):
     directions : array_like, shape (N, 3)
         Directions of the new rays: the origins move to the side of the surface these point to.
     error : array_like, shape (N,) or (N, 3), optional
-        Absolute error bound of the points (per point, or per coordinate) when it may exceed a
-        few hundred units in the last place: a point computed as ``origin + t * direction`` is off
-        by a few epsilons of ``|origin| + |t * direction|``, much more than its own ulps when the
-        ray came from far away.  The origins then first move this far along the normal.
+        Absolute error bound of the points when it may exceed a few hundred units in the last
+        place: per coordinate (N, 3), or already projected on the normal (N,).  A point computed
+        as ``origin + t * direction`` is off by a few epsilons of ``|origin| + |t * direction|``,
+        much more than its own ulps when the ray came from far away.  The origins then first
+        move this far along the normal (as pbrt-v4's ``OffsetRayOrigin``).
 
     Returns
     -------
@@ -56,19 +94,16 @@ def offset_ray_origin(points, normals, directions, *, error=None):
     shape = (len(points), 3)
     normals = as_float_array(normals, "normals", dtype, shape)
     directions = as_float_array(directions, "directions", dtype, shape)
-    # the normal on the side the new rays leave towards
-    outward = np.where(np.sum(normals * directions, axis=1, keepdims=True) < 0, -normals, normals)
-    if error is not None:
+    if error is None:
+        reach = np.zeros(len(points))
+    else:
         error = as_float_array(error, "error", np.float64)
         if error.shape not in ((len(points),), shape) or np.any(error < 0):
             raise ValueError(f"error must be non-negative with shape ({len(points)},) or "
                              f"({len(points)}, 3), got {error.shape}")
-        # pbrt-v4's OffsetRayOrigin: the error box's extent along the normal
-        reach = error if error.ndim == 1 else np.sum(np.abs(outward) * error, axis=1)
-        points = (points + reach[:, None] * outward).astype(dtype)
-    near, float_scale, int_scale = _CONSTANTS[dtype]
-    ulps = (int_scale * outward).astype(_INT_OF[dtype])
-    bits = points.view(_INT_OF[dtype])
-    # a negative float grows in magnitude as its bit pattern grows: step the other way
-    stepped = (bits + np.where(points < 0, -ulps, ulps)).view(dtype)
-    return np.where(np.abs(points) < near, points + float_scale * outward, stepped)
+        # the error box's extent along the normal
+        reach = error if error.ndim == 1 else np.sum(np.abs(normals) * error, axis=1)
+    near, float_scale, int_scale = (dtype(value) for value in _CONSTANTS[dtype])
+    out = np.empty(shape, dtype)
+    _offset(points, normals, directions, reach, near, float_scale, int_scale, out)
+    return out

@@ -6,6 +6,7 @@ lit hit), ``id`` (a colour per geometry id).  Misses get the background colour.
 """
 
 import numpy as np
+from numba import njit, prange
 
 from raycore.offset import offset_ray_origin
 
@@ -61,6 +62,9 @@ def render(scene, origins, directions, width, height, shading="lambert", *,
     if origins.shape != (width * height, 3):
         raise ValueError(f"origins must have shape ({width * height}, 3) for a {width}x{height} "
                          f"image, got {origins.shape}")
+    if shading == "lambert":
+        light = _unit_light(light_direction)
+        colors = _color_table(colors, len(scene))
     fields = ("normal",) if shading in ("normal", "lambert") else ()
     hits = scene.intersect(origins, directions, triangle_test=triangle_test, fields=fields)
     hit = hits.hit
@@ -70,18 +74,86 @@ def render(scene, origins, directions, width, height, shading="lambert", *,
         image[hit] = _depth(hits.t[hit])[:, None]
     elif shading == "id":
         image[hit] = _id_colors(hits.geom_id[hit])
+    elif shading == "normal":
+        facing, _, _, _ = _surface(scene, origins, directions, hits, np.zeros(3))
+        image[hit] = np.round((facing[hit] * 0.5 + 0.5) * 255)
     else:
-        # the side of the surface the camera sees
-        normal = hits.normal[hit].astype(np.float64)
-        facing = np.where(np.sum(normal * directions[hit], axis=1, keepdims=True) > 0,
-                          -normal, normal)
-        if shading == "normal":
-            image[hit] = np.round((facing * 0.5 + 0.5) * 255)
-        else:
-            rays = (origins[hit], directions[hit], hits.t[hit])
-            image[hit] = _lambert(scene, rays, hits.geom_id[hit], facing, light_direction,
-                                  colors, ambient, triangle_test)
+        facing, cosine, points, reach = _surface(scene, origins, directions, hits, light)
+        lit = cosine > 0
+        toward = np.broadcast_to(light, points.shape)
+        shadow_origins = offset_ray_origin(points, facing, toward, error=reach)
+        # every ray gets a shadow ray, so nothing is gathered; the empty interval [0, -1] makes
+        # those of unlit pixels and misses cost nothing
+        lit &= ~scene.occluded(shadow_origins, toward, 0.0, np.where(lit, np.inf, -1.0),
+                               triangle_test=triangle_test)
+        _shade_lambert(colors, hits.geom_id, cosine, lit, float(ambient), image)
     return image.reshape(height, width, 3)
+
+
+def _unit_light(light_direction):
+    light = np.asarray(light_direction, dtype=np.float64)
+    if light.shape != (3,) or not np.all(np.isfinite(light)) or not np.any(light):
+        raise ValueError("light_direction must be a finite non-zero 3-vector, "
+                         f"got {light_direction!r}")
+    return light / np.linalg.norm(light)
+
+
+def _color_table(colors, count):
+    if colors is None:
+        return np.tile(np.asarray(DEFAULT_COLOR), (count, 1))
+    colors = np.asarray(colors, dtype=np.float64)
+    if colors.ndim != 2 or colors.shape[1] != 3 or len(colors) < count:
+        raise ValueError(f"colors must have shape ({count}, 3), got {colors.shape}")
+    return colors
+
+
+def _surface(scene, origins, directions, hits, light):
+    """Per ray: the normal facing the camera, its cosine to ``light``, the hit point in the
+    scene's precision and its error bound along the normal (zeros where missed)."""
+    count = len(hits)
+    facing, cosine = np.empty((count, 3)), np.empty(count)
+    points, reach = np.empty((count, 3), scene.dtype), np.empty(count)
+    error_eps = _POINT_ERROR_EPS * float(np.finfo(scene.dtype).eps)
+    _surface_kernel(origins, directions, hits.t, hits.normal, light, error_eps, facing, cosine,
+                    points, reach)
+    return facing, cosine, points, reach
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _surface_kernel(origins, directions, t, normals, light, error_eps, facing, cosine, points,
+                    reach):
+    for i in prange(len(t)):
+        if not t[i] < np.inf:
+            facing[i] = 0.0
+            points[i] = 0.0
+            cosine[i] = 0.0
+            reach[i] = 0.0
+            continue
+        towards_ray = (normals[i, 0] * directions[i, 0] + normals[i, 1] * directions[i, 1]
+                       + normals[i, 2] * directions[i, 2])
+        side = -1.0 if towards_ray > 0 else 1.0
+        lit, bound = 0.0, 0.0
+        for k in range(3):
+            normal = side * normals[i, k]
+            step = t[i] * directions[i, k]
+            facing[i, k] = normal
+            points[i, k] = origins[i, k] + step
+            lit += normal * light[k]
+            bound += abs(normal) * error_eps * (abs(origins[i, k]) + abs(step))
+        cosine[i] = lit
+        reach[i] = bound
+
+
+@njit(cache=True, parallel=True)
+def _shade_lambert(colors, geom_id, cosine, lit, ambient, image):
+    """Colours of hits (misses are left alone): albedo * (ambient + direct light)."""
+    for i in prange(len(geom_id)):
+        if geom_id[i] < 0:
+            continue
+        intensity = ambient + (1.0 - ambient) * (cosine[i] if lit[i] else 0.0)
+        for k in range(3):
+            value = min(max(colors[geom_id[i], k] * intensity, 0.0), 1.0)
+            image[i, k] = np.uint8(np.floor(value * 255.0 + 0.5))
 
 
 def _depth(t):
@@ -98,33 +170,3 @@ def _id_colors(geom_id):
     channels = np.stack([(hashed >> np.uint64(shift)) & np.uint64(0xFF) for shift in (16, 8, 0)],
                         axis=1)
     return (64 + channels * 3 // 4).astype(np.uint8)
-
-
-def _lambert(scene, rays, geom_id, facing, light_direction, colors, ambient, triangle_test):
-    """(N, 3) uint8 colours of hits under a directional light, shadowed by the scene."""
-    origins, directions, t = rays
-    light = np.asarray(light_direction, dtype=np.float64)
-    if light.shape != (3,) or not np.all(np.isfinite(light)) or not np.any(light):
-        raise ValueError("light_direction must be a finite non-zero 3-vector, "
-                         f"got {light_direction!r}")
-    light = light / np.linalg.norm(light)
-    if colors is None:
-        albedo = np.broadcast_to(DEFAULT_COLOR, (len(geom_id), 3))
-    else:
-        colors = np.asarray(colors, dtype=np.float64)
-        if colors.ndim != 2 or colors.shape[1] != 3 or len(colors) < len(scene):
-            raise ValueError(f"colors must have shape ({len(scene)}, 3), got {colors.shape}")
-        albedo = colors[geom_id]
-    cosine = facing @ light
-    lit = cosine > 0
-    if np.any(lit):
-        dtype = scene.dtype
-        step = t[lit, None] * directions[lit]
-        points = (origins[lit] + step).astype(dtype)
-        error = _POINT_ERROR_EPS * np.finfo(dtype).eps * (np.abs(origins[lit]) + np.abs(step))
-        toward = np.broadcast_to(light, points.shape)
-        shadow_origins = offset_ray_origin(points, facing[lit], toward, error=error)
-        shadowed = scene.occluded(shadow_origins, toward, triangle_test=triangle_test)
-        lit[np.flatnonzero(lit)[shadowed]] = False
-    intensity = ambient + (1 - ambient) * np.where(lit, cosine, 0.0)
-    return np.round(np.clip(albedo * intensity[:, None], 0, 1) * 255).astype(np.uint8)
