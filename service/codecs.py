@@ -7,6 +7,7 @@ A query result is a dict of named columns (NumPy arrays with one row per ray, or
 import io
 import json
 import tokenize
+import zlib
 
 import numpy as np
 
@@ -56,13 +57,6 @@ def read_npy(body):
                          f"({count * dtype.itemsize} bytes), the body holds {data} bytes of data")
     array = np.frombuffer(body, dtype=dtype, count=count, offset=stream.tell())
     return array.reshape(shape, order="F" if fortran_order else "C")
-
-
-def write_npy(array):
-    """Bytes of ``array`` as an .npy file."""
-    stream = io.BytesIO()
-    np.lib.format.write_array(stream, array, allow_pickle=False)
-    return stream.getvalue()
 
 
 def rays_from_npy(array, tmin, tmax):
@@ -125,24 +119,49 @@ def columns_to_json(columns):
 
 
 def columns_to_npy(columns):
-    """.npy bytes of result columns as one structured array (``counts`` of ``all`` is left out:
-    it is ``np.bincount(ray_index)``); ids as int32."""
+    """An .npy file of result columns as one structured array (``counts`` of ``all`` is left
+    out: it is ``np.bincount(ray_index)``); ids as int32.
+
+    Returns
+    -------
+    memoryview
+        The file's bytes: the table is filled in place after the header, never copied.
+    """
     columns = {name: column for name, column in columns.items() if name != "counts"}
     length = len(next(iter(columns.values())))
-    fields = []
-    for name, column in columns.items():
-        dtype = _ID_DTYPE if column.dtype.kind in "iu" else column.dtype.newbyteorder("<")
-        fields.append((name, dtype, column.shape[1:]))
-    table = np.empty(length, dtype=fields)
+    dtype = np.dtype([(name, _ID_DTYPE if column.dtype.kind in "iu"
+                       else column.dtype.newbyteorder("<"), column.shape[1:])
+                      for name, column in columns.items()])
+    stream = io.BytesIO()
+    np.lib.format.write_array_header_1_0(stream, {
+        "descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False, "shape": (length,)})
+    header = stream.getvalue()
+    buffer = bytearray(len(header) + length * dtype.itemsize)
+    buffer[:len(header)] = header
+    table = np.frombuffer(buffer, dtype, count=length, offset=len(header))
     for name, column in columns.items():
         table[name] = column
-    return write_npy(table)
+    return memoryview(buffer)
 
 
 def png(image):
-    """PNG bytes of an (H, W, 3) uint8 image (fast compression: renders are sent once)."""
-    from PIL import Image
+    """PNG bytes of an (H, W, 3) uint8 image.
 
-    stream = io.BytesIO()
-    Image.fromarray(image).save(stream, format="PNG", compress_level=1)
-    return stream.getvalue()
+    Written here rather than by Pillow: each row "Sub"-filtered (the difference to the pixel on
+    its left) and deflated at level 1 is three times faster for a similar size, and renders are
+    encoded once, on the request's clock.
+    """
+    height, width, _ = image.shape
+    rows = np.empty((height, 1 + 3 * width), np.uint8)
+    rows[:, 0] = 1  # filter type Sub
+    flat = image.reshape(height, 3 * width)
+    rows[:, 1:4] = flat[:, :3]
+    np.subtract(flat[:, 3:], flat[:, :-3], out=rows[:, 4:])  # wraps modulo 256, as PNG wants
+
+    def chunk(kind, data):
+        return (len(data).to_bytes(4, "big") + kind + data
+                + zlib.crc32(kind + data).to_bytes(4, "big"))
+
+    header = width.to_bytes(4, "big") + height.to_bytes(4, "big") + bytes([8, 2, 0, 0, 0])
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
+            + chunk(b"IDAT", zlib.compress(rows.tobytes(), 1)) + chunk(b"IEND", b""))

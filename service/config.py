@@ -28,7 +28,8 @@ class Settings:
         Memory budget of the scene and mesh store; least recently used entries go first.
     compute_slots : int
         Requests that run geometry work at once.  Each query already uses every core, so more
-        slots only add memory.
+        slots mostly add memory; and more than one is only safe when Numba's threading layer
+        is thread-safe (omp or tbb: the workqueue layer aborts on concurrent parallel kernels).
     demo : bool
         Build the demo scene (id ``demo``) at startup.
     """
@@ -38,7 +39,7 @@ class Settings:
     max_triangles: int = 4_000_000
     max_render_pixels: int = 4096 * 4096
     store_bytes: int = 2048 * MIB
-    compute_slots: int = 2
+    compute_slots: int = 1
     demo: bool = True
 
 

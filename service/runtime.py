@@ -25,10 +25,11 @@ class Runtime:
     limiter: anyio.CapacityLimiter | None = None
 
     async def compute(self, function, *args):
-        """Run CPU work in a worker thread, off the event loop, one of ``compute_slots`` at once.
+        """Run CPU work in a worker thread, off the event loop, ``compute_slots`` at once.
 
-        Numba kernels hold the GIL while they run (they are not compiled with ``nogil``): the
-        loop still stalls during a kernel, but parses, encodes and serves between them.
+        The kernels' parallel loops release the GIL, so the event loop keeps serving (health
+        checks, other uploads) while one runs; their serial parts and NumPy calls hold it for
+        tens of milliseconds at most.
         """
         return await anyio.to_thread.run_sync(partial(function, *args), limiter=self.limiter)
 
