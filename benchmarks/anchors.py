@@ -66,6 +66,7 @@ class Trimesh:
     def closest(self, origins, directions):
         index_tri, index_ray, locations = self._intersector.intersects_id(
             origins, directions, multiple_hits=False, return_locations=True)
+        locations = np.asarray(locations).reshape(-1, 3)  # (0,) when nothing is hit
         t = np.full(len(origins), np.inf)
         prim = np.full(len(origins), -1, np.int64)
         t[index_ray] = np.einsum("ij,ij->i", locations - origins[index_ray],

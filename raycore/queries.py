@@ -5,7 +5,7 @@ traversal stacks, so nothing is allocated per ray.
 """
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, parallel_chunksize, prange
 
 from raycore._fp import like, unit_roundoff
 from raycore.bvh.traverse import ALL, ANY, CLOSEST, MESH, trace_rays
@@ -42,8 +42,11 @@ def _trace(mode, origins, directions, tmin, tmax, test, sphere_method, scene, ou
     if hits is None:
         hits = (np.empty(0, origins.dtype), np.empty(0, np.int64), np.empty(0, np.int64))
         offsets = np.zeros(1, np.int64)
-    _trace_parallel(mode, origins, directions, tmin, tmax, test, sphere_method, *scene, *outputs,
-                    offsets, *hits)
+    # one chunk of CHUNK rays per scheduling step: rays cost very different amounts (a miss is
+    # ten times cheaper than a hit), and static halves would leave one core idle
+    with parallel_chunksize(1):
+        _trace_parallel(mode, origins, directions, tmin, tmax, test, sphere_method, *scene,
+                        *outputs, offsets, *hits)
     return outputs
 
 
