@@ -86,7 +86,10 @@ def rays_from_json(request):
         tmax = np.inf
     elif isinstance(tmax, list):
         tmax = [np.inf if value is None else value for value in tmax]
-    return request.origins, request.directions, request.tmin, tmax
+    # (0, 3) for an empty batch, which np.asarray alone would make (0,)
+    origins = np.asarray(request.origins, dtype=np.float64).reshape(-1, 3)
+    directions = np.asarray(request.directions, dtype=np.float64).reshape(-1, 3)
+    return origins, directions, request.tmin, tmax
 
 
 def result_columns(query, result):
@@ -111,7 +114,9 @@ def columns_to_json(columns):
     for name, column in columns.items():
         values = column.tolist()
         if column.dtype.kind == "f":
-            finite = np.isfinite(column.reshape(len(column), -1)).all(axis=1)
+            finite = np.isfinite(column)
+            if column.ndim > 1:
+                finite = finite.all(axis=1)
             for row in np.flatnonzero(~finite):
                 values[row] = None
         answer[name] = values

@@ -243,3 +243,22 @@ def test_too_many_json_rays_and_unknown_scene(client, scene_id):
     response = client.post("/v1/scenes/ffff/intersect", json={"origins": ORIGINS,
                                                               "directions": DIRECTIONS})
     assert response.status_code == 404 and "ffff" in response.json()["detail"]
+
+
+@pytest.mark.parametrize("query", ["closest", "any", "all", "count"])
+def test_misses_and_empty_batches(client, query):
+    """Regression: an ``all`` answer without hits was a 500 (empty columns in JSON)."""
+    empty_scene = client.post("/v1/scenes", json={"objects": []}).json()["id"]
+    url = f"/v1/scenes/{empty_scene}/intersect"
+    missed = client.post(url, json={"origins": ORIGINS, "directions": DIRECTIONS, "query": query})
+    assert missed.status_code == 200, missed.text
+    assert missed.json() == {"closest": {"t": [None], "geom_id": [-1], "prim_id": [-1]},
+                             "any": {"occluded": [False]}, "count": {"count": [0]},
+                             "all": {"ray_index": [], "t": [], "geom_id": [], "prim_id": [],
+                                     "counts": [0]}}[query]
+    empty = client.post(url, json={"origins": [], "directions": [], "query": query})
+    assert empty.status_code == 200, empty.text
+    assert all(values == [] for values in empty.json().values())
+    table = load_npy(post_npy(client, empty_scene, npy_bytes(np.zeros((0, 6))),
+                              f"?query={query}").content)
+    assert len(table) == 0
