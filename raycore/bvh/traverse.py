@@ -86,6 +86,9 @@ def _descend(nodes, refs, row, row_base, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx,
     """Test both children of ``row``: return the nearer internal child to visit next (-1 if
     none), pushing the farther one, and the children that are leaves, nearest first.
 
+    A leaf's count is returned for an entered leaf only; internal children have count 0, so
+    ``(first, count)`` pairs can be looped over directly.
+
     Returns
     -------
     next_row, top, first0, count0, first1, count1
@@ -93,28 +96,26 @@ def _descend(nodes, refs, row, row_base, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx,
     """
     t_left = _enter(nodes, row, 0, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, tmin, tmax)
     t_right = _enter(nodes, row, 6, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, tmin, tmax)
-    near = 0 if t_left <= t_right else 1
-    next_row = -1
-    first0 = count0 = first1 = count1 = 0
-    for i in range(2):
-        side = near ^ i
-        t_box = t_left if side == 0 else t_right
-        if t_box == np.inf:
-            continue
-        ref = refs[row, LEFT_REF + side]
-        count = refs[row, LEFT_COUNT + side]
-        if count > 0:
-            if count0 == 0:
-                first0, count0 = ref, count
-            else:
-                first1, count1 = ref, count
-        elif next_row < 0:
-            next_row = row_base + ref
-        else:
-            stack[top] = row_base + ref
-            stack_t[top] = t_box
-            top += 1
-    return next_row, top, first0, count0, first1, count1
+    # Which child is nearer is a coin toss for the branch predictor: order them with selects
+    # and push with a conditional increment instead of branching.
+    swap = t_right < t_left
+    near_side = LEFT_REF + np.int64(swap)
+    far_side = LEFT_REF + 1 - np.int64(swap)
+    t_near = t_right if swap else t_left
+    t_far = t_left if swap else t_right
+    near_ref = refs[row, near_side]
+    near_count = refs[row, near_side + 2]
+    far_ref = refs[row, far_side]
+    far_count = refs[row, far_side + 2]
+    # the far child is entered only if the near one is (t_near <= t_far)
+    near_hit = t_near != np.inf
+    far_hit = t_far != np.inf
+    stack[top] = row_base + far_ref
+    stack_t[top] = t_far
+    top += np.int64(far_hit and far_count == 0)
+    next_row = row_base + near_ref if near_hit and near_count == 0 else -1
+    return (next_row, top, near_ref, near_count if near_hit else 0, far_ref,
+            far_count if far_hit else 0)
 
 
 @njit(cache=True, inline="always")
