@@ -108,3 +108,21 @@ def test_random_mesh_files(fuzz_client, body, file_type):
     client, _ = fuzz_client
     response = client.post(f"/v1/meshes?format={file_type}", content=body)
     assert response.status_code < 500, response.text
+
+
+vector = st.lists(st.floats(-10, 10) | st.sampled_from([0.0, 1e30]), min_size=3, max_size=3)
+
+
+@FUZZ
+@given(rays=st.lists(st.tuples(vector, vector), max_size=4),
+       query=st.sampled_from(["closest", "any", "all", "count"]), tmin=st.floats(-1, 5),
+       tmax=st.none() | st.floats(-1, 5),
+       fields=st.lists(st.sampled_from(["uv", "normal", "point"]), unique=True))
+def test_random_ray_batches(fuzz_client, rays, query, tmin, tmax, fields):
+    """Well-formed requests of any size, bounds and query: answered, or refused as invalid."""
+    client, urls = fuzz_client
+    body = {"origins": [origin for origin, _ in rays],
+            "directions": [direction for _, direction in rays], "query": query, "tmin": tmin,
+            "tmax": tmax, "fields": fields if query == "closest" else []}
+    response = post_json(client, urls["intersect"], body)
+    assert response.status_code in (200, 422), response.text
