@@ -126,8 +126,9 @@ def bench_intersect(client, url, scene, rays, repeats):
 
 
 def bench_render(client, url, scene, camera, repeats):
+    # as the service makes them, in the scene's precision
     rays = perspective_rays(camera["position"], camera["look_at"], camera["up"], camera["fov"],
-                            RENDER_SIZE, RENDER_SIZE)
+                            RENDER_SIZE, RENDER_SIZE, scene.dtype)
     trace = full = remote = np.inf
     for _ in range(repeats):
         timed = TimedScene(scene)

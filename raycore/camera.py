@@ -7,7 +7,7 @@ the view, image y grows downwards.
 
 import numpy as np
 
-from raycore.rays import as_float_array
+from raycore.rays import as_float_array, resolve_dtype
 
 
 def _frame(position, look_at, up):
@@ -37,13 +37,15 @@ def _pixel_grid(width, height):
     return x, y
 
 
-def _plane_points(center, right, up, across, rise):
-    """(H*W, 3) points ``center + across[w] * right + rise[h] * up`` in scanline order."""
-    row = center + across[:, None] * right  # (W, 3)
-    return (row[None] + (rise[:, None] * up)[:, None]).reshape(-1, 3)
+def _plane_points(center, right, up, across, rise, dtype):
+    """(H*W, 3) points ``center + across[w] * right + rise[h] * up`` in scanline order, summed
+    in ``dtype`` from one (W, 3) and one (H, 3) term computed in float64."""
+    row = (center + across[:, None] * right).astype(dtype)
+    column = (rise[:, None] * up).astype(dtype)
+    return (row[None] + column[:, None]).reshape(-1, 3)
 
 
-def perspective_rays(position, look_at, up, fov, width, height):
+def perspective_rays(position, look_at, up, fov, width, height, dtype="float64"):
     """Pinhole camera rays.
 
     Parameters
@@ -53,10 +55,12 @@ def perspective_rays(position, look_at, up, fov, width, height):
         Vertical field of view in degrees, in (0, 180).
     width, height : int
         Image size in pixels.
+    dtype : {"float64", "float32"}
+        Precision of the rays: that of the scene they go to saves it a conversion.
 
     Returns
     -------
-    origins, directions : ndarray of float64, shape (height * width, 3)
+    origins, directions : ndarray, shape (height * width, 3)
         Every origin is ``position``; directions are unit length.
 
     Raises
@@ -71,13 +75,15 @@ def perspective_rays(position, look_at, up, fov, width, height):
     # offsets on the image plane at distance 1, per column and per row
     across = x * np.tan(np.radians(fov) / 2) * width / height
     rise = y * np.tan(np.radians(fov) / 2)
-    directions = _plane_points(forward, right, true_up, across, rise)
+    dtype = resolve_dtype(dtype)
+    directions = _plane_points(forward, right, true_up, across, rise, dtype)
     # the axes are orthonormal: |forward + a right + b up|^2 = 1 + a^2 + b^2
-    directions *= (1 / np.sqrt(1 + across[None, :] ** 2 + rise[:, None] ** 2)).reshape(-1, 1)
-    return np.broadcast_to(position, directions.shape).copy(), directions
+    directions *= (1 / np.sqrt(1 + across[None, :] ** 2 + rise[:, None] ** 2)).astype(
+        dtype).reshape(-1, 1)
+    return np.broadcast_to(position.astype(dtype), directions.shape).copy(), directions
 
 
-def orthographic_rays(position, look_at, up, view_height, width, height):
+def orthographic_rays(position, look_at, up, view_height, width, height, dtype="float64"):
     """Parallel rays from a view plane through ``position``, perpendicular to it.
 
     Parameters
@@ -87,10 +93,12 @@ def orthographic_rays(position, look_at, up, view_height, width, height):
         Height of the view in scene units (its width follows the image's aspect ratio).
     width, height : int
         Image size in pixels.
+    dtype : {"float64", "float32"}
+        Precision of the rays.
 
     Returns
     -------
-    origins, directions : ndarray of float64, shape (height * width, 3)
+    origins, directions : ndarray, shape (height * width, 3)
         Origins on the view plane; every direction is the unit view direction.
 
     Raises
@@ -104,5 +112,6 @@ def orthographic_rays(position, look_at, up, view_height, width, height):
     x, y = _pixel_grid(width, height)
     across = x * view_height / 2 * width / height
     rise = y * view_height / 2
-    origins = _plane_points(position, right, true_up, across, rise)
-    return origins, np.broadcast_to(forward, origins.shape).copy()
+    dtype = resolve_dtype(dtype)
+    origins = _plane_points(position, right, true_up, across, rise, dtype)
+    return origins, np.broadcast_to(forward.astype(dtype), origins.shape).copy()

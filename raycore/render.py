@@ -80,7 +80,8 @@ def render(scene, origins, directions, width, height, shading="lambert", *,
     else:
         facing, cosine, points, reach = _surface(scene, origins, directions, hits, light)
         lit = cosine > 0
-        toward = np.broadcast_to(light, points.shape)
+        toward = np.empty_like(points)
+        toward[:] = light
         shadow_origins = offset_ray_origin(points, facing, toward, error=reach)
         # every ray gets a shadow ray, so nothing is gathered; the empty interval [0, -1] makes
         # those of unlit pixels and misses cost nothing
@@ -108,10 +109,11 @@ def _color_table(colors, count):
 
 
 def _surface(scene, origins, directions, hits, light):
-    """Per ray: the normal facing the camera, its cosine to ``light``, the hit point in the
-    scene's precision and its error bound along the normal (zeros where missed)."""
+    """Per ray: the normal facing the camera and the hit point (in the scene's precision, as
+    shadow rays need them), the normal's cosine to ``light`` and the point's error bound along
+    it (zeros where missed)."""
     count = len(hits)
-    facing, cosine = np.empty((count, 3)), np.empty(count)
+    facing, cosine = np.empty((count, 3), scene.dtype), np.empty(count)
     points, reach = np.empty((count, 3), scene.dtype), np.empty(count)
     error_eps = _POINT_ERROR_EPS * float(np.finfo(scene.dtype).eps)
     _surface_kernel(origins, directions, hits.t, hits.normal, light, error_eps, facing, cosine,

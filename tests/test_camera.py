@@ -63,3 +63,21 @@ def test_bad_perspective_arguments_name_themselves(change, name):
 def test_bad_view_height(view_height):
     with pytest.raises(ValueError, match="view_height"):
         orthographic_rays(**VIEW, view_height=view_height, width=4, height=4)
+
+
+@pytest.mark.parametrize("make", [
+    lambda dtype: perspective_rays(**VIEW, fov=50.0, width=16, height=8, dtype=dtype),
+    lambda dtype: orthographic_rays(**{**VIEW, "position": [1e4, 0.0, -5.0]}, view_height=3.0,
+                                    width=16, height=8, dtype=dtype),
+])
+def test_float32_rays_are_the_float64_rays_rounded(make):
+    origins, directions = make("float32")
+    assert origins.dtype == directions.dtype == np.float32
+    exact_origins, exact_directions = make("float64")
+    np.testing.assert_allclose(origins, exact_origins, rtol=2e-7, atol=1e-7)
+    np.testing.assert_allclose(directions, exact_directions, rtol=2e-7, atol=2e-7)
+
+
+def test_bad_dtype():
+    with pytest.raises(ValueError, match="dtype"):
+        perspective_rays(**VIEW, fov=50.0, width=4, height=4, dtype="float16")

@@ -159,10 +159,11 @@ async def render_scene(scene_id: str, spec: RenderRequest, state: State):
     def draw():
         view = (camera.position, camera.look_at, camera.up)
         try:
+            size = (camera.width, camera.height, entry.scene.dtype)
             if camera.type == "perspective":
-                rays = perspective_rays(*view, camera.fov, camera.width, camera.height)
+                rays = perspective_rays(*view, camera.fov, *size)
             else:
-                rays = orthographic_rays(*view, camera.view_height, camera.width, camera.height)
+                rays = orthographic_rays(*view, camera.view_height, *size)
             image = render(entry.scene, *rays, camera.width, camera.height, spec.shading,
                            light_direction=spec.light_direction, colors=entry.colors,
                            background=np.asarray(spec.background), ambient=spec.ambient,
