@@ -94,7 +94,7 @@ METHODS = (
     tuple(Method("triangle", name) for name in TRIANGLE_TESTS)
     + tuple(Method("sphere", name) for name in SPHERE_METHODS)
 )
-QUADRIC = Method("quadric", "stable quadratic")
+QUADRIC = Method("quadric", "cylinder/cone")
 
 
 # ----------------------------------------------------------------------------- cases
@@ -779,3 +779,101 @@ def measure_anchor(case, anchor_class, limit=None):
         origins, directions = origins.astype(np.float32), directions.astype(np.float32)
     t, _ = anchor.closest(origins, directions)
     return compare(t, rays)
+
+
+# ----------------------------------------------------------------------------- secondary rays
+
+#: Where the spawning surface lies: (center, radius) of a sphere (analytic for the sphere
+#: methods, an icosphere of 1280 triangles for the triangle tests), from near the origin to
+#: 1e6 away; "box-surface": points exactly on the faces of a tessellated box (triangles only): ray
+#: origins that lie exactly on a surface.
+SPAWN_PLACES = {
+    "near the origin": ((0.0, 0.0, 0.0), 1.0),
+    "at 1e4": ((1e4, -1e4, 1e4), 100.0),
+    "at 1e6": ((-1e6, 1e6, 1e6), 1e4),
+    "box-surface": None,
+}
+#: How the secondary rays start: from the hit point with tmin = 0; from the hit point with a
+#: fixed tmin = 1e-4 (unit directions); from raycore.offset_ray_origin with tmin = 0.
+SPAWN_STRATEGIES = ("tmin = 0", "tmin = 1e-4", "offset_ray_origin")
+
+
+@functools.cache
+def _spawn_scene(family, dtype, place):
+    scene = Scene(dtype=dtype)
+    if place == "box-surface":
+        scene.add_mesh(*tessellated_box(4))
+        return scene.build()
+    center, radius = SPAWN_PLACES[place]
+    if family == "sphere":
+        scene.add_sphere(center, radius)
+    else:
+        vertices, faces = icosphere(3, radius=radius, center=center)
+        scene.add_mesh(vertices, faces)
+    return scene.build()
+
+
+def _hemisphere(rng, normals, outward, lean=0.0):
+    """Random unit directions on the outer (or inner) side of unit ``normals``, at least
+    ``lean / (1 + lean)`` off the surface in cosine."""
+    directions = sampling.unit_vectors(rng, len(normals))
+    side = np.sign(np.sum(directions * normals, axis=1, keepdims=True)) * (1 if outward else -1)
+    directions = directions * side + lean * normals * (1 if outward else -1)
+    return unit(directions)
+
+
+@functools.cache
+def _spawn_points(family, dtype, place, count=2000):
+    """Points on the surface, their unit normals and the surface's size."""
+    rng = np.random.default_rng(73)
+    scene = _spawn_scene(family, dtype, place)
+    if place == "box-surface":
+        # exactly on the faces of [-1, 1]^3, on a 2**-8 grid, on the triangles' edges and
+        # vertices too, an eighth or more away from the box's edges (where a ray entering
+        # through one face may leave at once through the next)
+        axis = rng.integers(0, 3, count)
+        side = rng.choice([-1.0, 1.0], count)
+        points = rng.integers(-224, 225, (count, 3)) / 256.0
+        points[np.arange(count), axis] = side
+        normals = np.zeros((count, 3))
+        normals[np.arange(count), axis] = side
+        return points.astype(dtype), normals.astype(dtype), 1.0
+    center, radius = np.asarray(SPAWN_PLACES[place][0]), SPAWN_PLACES[place][1]
+    origins = center + 3 * radius * sampling.unit_vectors(rng, count)
+    targets = center + 0.9 * radius * sampling.unit_vectors(rng, count)
+    hits = scene.intersect(origins, targets - origins, fields=("normal", "point"))
+    assert hits.hit.all()
+    return hits.point, hits.normal, radius
+
+
+def self_intersection(method, dtype, place, strategy, count=2000):
+    """Failure rate of secondary rays spawned on a closed convex surface.
+
+    Half the rays leave the surface (outwards: any hit is a self-hit), half enter it, leaning
+    at least 1/6 in cosine towards the inside (they must cross the inside and hit the far side,
+    further than 1e-3 of the size: a nearer hit is a self-hit, a miss an escape).
+
+    Returns
+    -------
+    float
+        The fraction of rays that self-hit or escape.
+    """
+    from raycore import offset_ray_origin
+
+    scene = _spawn_scene(method.family, dtype, place)
+    points, normals, size = _spawn_points(method.family, dtype, place, count)
+    rng = np.random.default_rng(79)
+    half = len(points) // 2
+    directions = np.concatenate([_hemisphere(rng, normals[:half], outward=True),
+                                 _hemisphere(rng, normals[half:], outward=False, lean=0.2)])
+    directions = directions.astype(points.dtype)
+    tmin = 0.0
+    origins = points
+    if strategy == "tmin = 1e-4":
+        tmin = 1e-4
+    elif strategy == "offset_ray_origin":
+        origins = offset_ray_origin(points, normals, directions)
+    hits = scene.intersect(origins, directions, tmin, **method.options)
+    leaving_hit = hits.hit[:half]
+    entering_bad = ~hits.hit[half:] | (hits.t[half:] < 1e-3 * size)
+    return float((leaving_hit.sum() + entering_bad.sum()) / len(points))
