@@ -31,6 +31,12 @@ test: $(VENV)/.dev-installed
 bench: $(VENV)/.bench-installed
 	$(BIN)/python -m benchmarks.run
 
+# docs/speed-vs-accuracy.png and docs/model-what-you-need.png with their Markdown tables
+# (benchmarks/speed_accuracy.py).  The error figures come from tests/stability's catalogue and
+# the exact references in tests/primitives, so the test extras come with the benchmark stack.
+chart: $(VENV)/.bench-installed $(VENV)/.dev-installed
+	$(BIN)/python -m benchmarks.speed_accuracy
+
 # The committed OpenAPI document, generated from the app (tests/service fail when it drifts).
 openapi: $(VENV)/.dev-installed
 	$(BIN)/raycore openapi --output openapi/openapi.json
