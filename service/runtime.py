@@ -47,7 +47,7 @@ class Runtime:
 
 
 def _not_found(kind, key):
-    return NotFound(f"no {kind} {key!r} (it may have been evicted: upload it again)")
+    return NotFound(f"no {kind} {key!r} (it may have been evicted: send it again)")
 
 
 def runtime(request: Request) -> Runtime:

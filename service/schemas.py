@@ -292,7 +292,7 @@ _ERROR_EXAMPLES = {
           {"detail": "the .npy header announces shape (1000, 8) of <f4 (32000 bytes), the body "
                      "holds 31996 bytes of data"}),
     404: ("No such scene or mesh",
-          {"detail": f"no scene '{EXAMPLE_SCENE_ID}' (it may have been evicted: upload it again)"}),
+          {"detail": f"no scene '{EXAMPLE_SCENE_ID}' (it may have been evicted: send it again)"}),
     413: ("Over a configured limit",
           {"detail": "2500000 rays in one request; the limit is 2097152"}),
     415: ("Unreadable content type",
