@@ -60,8 +60,9 @@ def test_the_cases_are_the_hard_ones():
     for case in CASES:
         hit = ~np.isinf(case.rays("float32").truth)
         if case.panel == "leak":
-            # every one from inside; a few grid-line rays in face planes pass beside the box
-            assert hit.all() or (case.name == "grid-lines-box" and hit.mean() > 0.95), case.name
+            assert hit.all(), case.name
+        elif case.name == "face-planes-box":
+            assert hit.mean() > 0.9, case.name  # the touches count (a few rays pass beside)
         elif case.name in ("in-plane", "degenerate"):
             assert not hit.any(), case.name
         elif case.name.startswith(("sphere-far", "sphere-grazing", "cone-", "cylinder-")):
