@@ -2,6 +2,7 @@
 
 import logging
 import threading
+import time
 from contextlib import asynccontextmanager
 from importlib.metadata import version
 
@@ -41,6 +42,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   lifespan=_lifespan)
     app.state.runtime = Runtime(settings, Store(settings.store_bytes))
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(ServerTiming)
     app.add_exception_handler(ClientError, _client_error)
     app.add_exception_handler(RequestValidationError, _invalid_request)
     app.add_exception_handler(Exception, _unexpected)
@@ -59,6 +61,30 @@ async def _lifespan(app):
     else:
         state.ready.set()
     yield
+
+
+class ServerTiming:
+    """ASGI middleware: a ``Server-Timing: app;dur=<ms>`` header, the time from the request's
+    arrival to its answer's start (reading the body included), so that clients can tell the
+    service's time from the network's."""
+
+    def __init__(self, app):
+        self.app = app
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        start = time.perf_counter()
+
+        async def timed_send(message):
+            if message["type"] == "http.response.start":
+                elapsed = f"app;dur={1000 * (time.perf_counter() - start):.1f}"
+                message = {**message, "headers": [*message.get("headers", []),
+                                                  (b"server-timing", elapsed.encode())]}
+            await send(message)
+
+        await self.app(scope, receive, timed_send)
 
 
 class BodyLimit:

@@ -49,3 +49,9 @@ def test_torus_is_closed_and_consistently_wound():
     vertices, faces = torus()
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+
+
+def test_answers_carry_the_service_time(client):
+    for response in (client.get("/healthz"), client.get("/v1/scenes/none")):
+        name, duration = response.headers["server-timing"].split(";dur=")
+        assert name == "app" and float(duration) >= 0
