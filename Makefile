@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 HOST   ?= 127.0.0.1
 PORT   ?= 8000
 
-.PHONY: run test bench chart openapi lint clean
+.PHONY: run test bench chart openapi lint clean image-test
 
 # One stamp per set of extras, so that `make test` does not pull in the benchmark stack.
 $(BIN)/python:
@@ -40,6 +40,14 @@ chart: $(VENV)/.bench-installed $(VENV)/.dev-installed
 # The committed OpenAPI document, generated from the app (tests/service fail when it drifts).
 openapi: $(VENV)/.dev-installed
 	$(BIN)/raycore openapi --output openapi/openapi.json
+
+# The container image: build docker/Dockerfile with podman (on a Debian bookworm base made with
+# debootstrap, no registry needed) and exercise it as a container (docker/image_test.py).  Needs
+# root; installs podman and debootstrap from Debian's packages when they are missing.
+image-test:
+	@command -v podman >/dev/null && command -v debootstrap >/dev/null || \
+	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq podman debootstrap)
+	$(PYTHON) docker/image_test.py
 
 lint: $(VENV)/.dev-installed
 	$(BIN)/ruff check .

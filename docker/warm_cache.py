@@ -1,0 +1,366 @@
+"""Fill Numba's on-disk cache at image build time, so that a new container compiles nothing.
+
+Runs the service's own app in this process (``service.app.create_app``, settings from the
+environment, the demo scene included) and drives it through ASGI with a matrix of requests that
+reaches every kernel the HTTP API uses, in both precisions: scene builds (every shape, uploaded
+and inline meshes, instances), closest hits with each surface field, any, all and count queries
+with each triangle test, JSON and .npy ray batches (float32 and float64, (N, 6) and (N, 8),
+scalar and per-ray tmin/tmax, JSON and .npy answers), and renders with every shading and camera.
+Going through the routes, rather than calling the library, gives the kernels exactly the array
+types, layouts and dtypes that requests give them, which is what Numba specialises on.
+
+Then it starts a second interpreter (``--check``) that sends the same requests and fails if
+Numba compiled anything there: every kernel has to come from the cache.
+
+Usage (as the user the service runs as, with the NUMBA_CACHE_DIR it runs with)::
+
+    python warm_cache.py           # warm, then check in a fresh process
+    python warm_cache.py --check   # only check
+
+Standard library, NumPy and the service; no HTTP client and no network.
+"""
+
+import argparse
+import asyncio
+import io
+import json
+import os
+import subprocess
+import sys
+import time
+from urllib.parse import urlencode
+
+import numpy as np
+
+DTYPES = ("float32", "float64")
+TRIANGLE_TESTS = ("watertight", "moller", "geometric")
+NPY = "application/x-npy"
+
+
+# ----------------------------------------------------------------------------- ASGI client
+
+
+class AsgiClient:
+    """Just enough of an HTTP client to call an ASGI app in this process (lifespan included)."""
+
+    def __init__(self, app):
+        self.app = app
+        self.state = {}
+
+    async def __aenter__(self):
+        self._inbox, self._outbox = asyncio.Queue(), asyncio.Queue()
+        scope = {"type": "lifespan", "asgi": {"version": "3.0"}, "state": self.state}
+        self._lifespan = asyncio.create_task(self.app(scope, self._inbox.get, self._outbox.put))
+        await self._inbox.put({"type": "lifespan.startup"})
+        message = await self._outbox.get()
+        if message["type"] != "lifespan.startup.complete":
+            raise RuntimeError(f"the app did not start: {message}")
+        return self
+
+    async def __aexit__(self, *exc):
+        await self._inbox.put({"type": "lifespan.shutdown"})
+        await self._outbox.get()
+        await self._lifespan
+
+    async def request(self, method, path, body=b"", content_type=None, accept=None, query=None):
+        """Returns (status, content type, body bytes)."""
+        headers = [(b"host", b"warm"), (b"content-length", str(len(body)).encode())]
+        if content_type:
+            headers.append((b"content-type", content_type.encode()))
+        if accept:
+            headers.append((b"accept", accept.encode()))
+        scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1",
+                 "method": method, "scheme": "http", "path": path, "raw_path": path.encode(),
+                 "query_string": urlencode(query or {}, doseq=True).encode(), "root_path": "",
+                 "headers": headers, "client": ("127.0.0.1", 1), "server": ("warm", 80),
+                 "state": dict(self.state)}
+        done = asyncio.Event()
+        pending = [{"type": "http.request", "body": body, "more_body": False}]
+        answer = {"status": None, "type": "", "body": []}
+
+        async def receive():
+            if pending:
+                return pending.pop()
+            await done.wait()
+            return {"type": "http.disconnect"}
+
+        async def send(message):
+            if message["type"] == "http.response.start":
+                answer["status"] = message["status"]
+                answer["type"] = dict(message.get("headers", [])).get(b"content-type", b"")
+            elif message["type"] == "http.response.body":
+                answer["body"].append(message.get("body", b""))
+                if not message.get("more_body", False):
+                    done.set()
+
+        try:
+            await self.app(scope, receive, send)
+        except Exception as error:  # re-raised by the app after it answered 500
+            answer["status"], answer["body"] = 500, [repr(error).encode()]
+        done.set()
+        return answer["status"], answer["type"].decode(), b"".join(answer["body"])
+
+
+# ----------------------------------------------------------------------------- inputs
+
+
+def icosphere(subdivisions=1):
+    """A closed unit icosphere: (V, 3) float64 vertices, (F, 3) int64 faces."""
+    t = (1 + 5**0.5) / 2
+    vertices = [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+                [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]]
+    faces = [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+             [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+             [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]
+    vertices = [np.array(v, float) / np.linalg.norm(v) for v in vertices]
+    for _ in range(subdivisions):
+        midpoints, refined = {}, []
+
+        def middle(a, b):
+            key = (min(a, b), max(a, b))
+            if key not in midpoints:
+                point = vertices[a] + vertices[b]
+                vertices.append(point / np.linalg.norm(point))
+                midpoints[key] = len(vertices) - 1
+            return midpoints[key]
+
+        for a, b, c in faces:
+            ab, bc, ca = middle(a, b), middle(b, c), middle(c, a)
+            refined += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+        faces = refined
+    return np.array(vertices), np.array(faces, dtype=np.int64)
+
+
+def obj_bytes(vertices, faces):
+    lines = [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in vertices]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def stl_bytes(vertices, faces):
+    """Binary STL."""
+    triangles = vertices[faces].astype("<f4")
+    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    record = np.zeros(len(faces), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
+    record["n"], record["v"] = normals, triangles
+    return b"\0" * 80 + np.uint32(len(faces)).tobytes() + record.tobytes()
+
+
+def multipart(name, filename, data):
+    boundary = "raycorewarmboundary"
+    body = (f"--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"; "
+            f"filename=\"{filename}\"\r\nContent-Type: application/octet-stream\r\n\r\n"
+            ).encode() + data + f"\r\n--{boundary}--\r\n".encode()
+    return body, f"multipart/form-data; boundary={boundary}"
+
+
+def npy_bytes(array):
+    stream = io.BytesIO()
+    np.save(stream, array, allow_pickle=False)
+    return stream.getvalue()
+
+
+def rays(count, seed):
+    """Rays aimed at the middle of the scenes from around them, some missing: (N, 3) twice."""
+    rng = np.random.default_rng(seed)
+    origins = rng.normal(size=(count, 3))
+    origins = 8 * origins / np.linalg.norm(origins, axis=1, keepdims=True) + [0, 2, 0]
+    targets = rng.uniform(-3, 3, size=(count, 3)) + [0, 1, 0]
+    return origins, targets - origins
+
+
+def scenes(mesh_id):
+    """Scene specs, per dtype: every kind of object together, meshes only, shapes only."""
+    inline_v, inline_f = icosphere(0)
+    shift = [[1, 0, 0, 2.5], [0, 1, 0, 0.5], [0, 0, 1, -1], [0, 0, 0, 1]]
+    turn = [[0, -1, 0, 0], [1, 0, 0, 1], [0, 0, 1, 2], [0, 0, 0, 1]]
+    red = {"color": [0.9, 0.2, 0.2]}
+    shapes = [
+        {"type": "plane", "point": [0, 0, 0], "normal": [0, 1, 0]},
+        {"type": "sphere", "center": [0, 1.2, 0], "radius": 0.8, "material": red},
+        {"type": "disk", "center": [0, 0.01, 2.6], "normal": [0, 1, 0], "radius": 0.9},
+        {"type": "box", "lo": [1.8, 0, -0.6], "hi": [3.0, 1.2, 0.6]},
+        {"type": "box", "lo": [-1, 0, -1], "hi": [1, 1, 1], "transform": turn},
+        {"type": "cylinder", "p0": [-1.5, 0, -2.2], "p1": [-1.5, 1.6, -2.2], "radius": 0.45},
+        {"type": "cone", "base_center": [1.2, 0, -2.4], "apex": [1.2, 1.8, -2.4], "radius": 0.6},
+    ]
+
+    def meshes(first):  # the objects, from index ``first`` of the scene's objects on
+        return [
+            {"type": "mesh", "mesh": mesh_id, "material": red},
+            {"type": "instance", "mesh": mesh_id, "transform": shift},
+            {"type": "mesh", "vertices": (inline_v - [2, -1, 0]).tolist(),
+             "faces": inline_f.tolist()},
+            {"type": "instance", "mesh": first + 2, "transform": turn},
+        ]
+
+    for dtype in DTYPES:
+        yield dtype, {"dtype": dtype, "objects": shapes + meshes(len(shapes))}
+        yield dtype, {"dtype": dtype, "objects": meshes(0)}
+        yield dtype, {"dtype": dtype, "objects": shapes}
+
+
+def intersect_requests(seed):
+    """(description, body, content type, accept, URL query) of every kind of ray batch."""
+    origins, directions = rays(48, seed)
+    n = len(origins)
+    tmax = np.full(n, 20.0)
+    tmax[::3] = np.inf
+    for query in ("closest", "any", "all", "count"):
+        fieldsets = ([[], ["normal"], ["uv", "normal", "point"]] if query == "closest" else [[]])
+        for test in TRIANGLE_TESTS:
+            for fields in fieldsets:
+                base = {"query": query, "triangle_test": test, "fields": fields}
+                body = {**base, "origins": origins.tolist(), "directions": directions.tolist()}
+                yield f"json {query} {test} {fields}", json.dumps(body).encode(), \
+                    "application/json", None, None
+                per_ray = {**body, "tmin": [0.0] * n,
+                           "tmax": [None if not np.isfinite(t) else t for t in tmax]}
+                yield f"json per-ray {query} {test} {fields}", json.dumps(per_ray).encode(), \
+                    "application/json", NPY, None
+                # through the middle, where every scene has something to hit
+                one = {**base, "origins": [[0, 0.5, -8]], "directions": [[0, 0, 1]],
+                       "tmin": 0.5, "tmax": 30.0}
+                yield f"json one ray {query} {test} {fields}", json.dumps(one).encode(), \
+                    "application/json", None, None
+                for ray_dtype in DTYPES:
+                    six = np.hstack([origins, directions]).astype(ray_dtype)
+                    eight = np.hstack([six, np.zeros((n, 1)), tmax[:, None]]).astype(ray_dtype)
+                    params = {"query": query, "triangle_test": test}
+                    if fields:
+                        params["fields"] = fields
+                    for accept in (None, NPY):
+                        yield (f"npy {ray_dtype} (N, 6) {query} {test} {fields} {accept}",
+                               npy_bytes(six), NPY, accept, params)
+                        yield (f"npy {ray_dtype} (N, 6) tmax {query} {test} {fields} {accept}",
+                               npy_bytes(six), NPY, accept, {**params, "tmin": 0.1, "tmax": 15})
+                        yield (f"npy {ray_dtype} (N, 8) {query} {test} {fields} {accept}",
+                               npy_bytes(eight), NPY, accept, params)
+                        fortran = np.asfortranarray(six)
+                        yield (f"npy {ray_dtype} fortran {query} {test} {fields} {accept}",
+                               npy_bytes(fortran), NPY, accept, params)
+
+
+def render_requests():
+    views = [{"type": "perspective", "position": [7, 5, -9], "look_at": [0, 1, 0], "fov": 45},
+             {"type": "orthographic", "position": [0, 6, -9], "look_at": [0, 1, 0],
+              "view_height": 8}]
+    for camera in views:
+        for shading in ("depth", "normal", "lambert", "id"):
+            tests = TRIANGLE_TESTS if shading == "lambert" else ("watertight",)
+            for test in tests:
+                yield {"camera": {**camera, "width": 24, "height": 16}, "shading": shading,
+                       "triangle_test": test, "background": [10, 20, 30]}
+
+
+# ----------------------------------------------------------------------------- the run
+
+
+class CompileLog:
+    """Records each function Numba compiles (not those it loads from its cache)."""
+
+    def __init__(self):
+        from numba.core import event
+
+        outer = self
+
+        class Listener(event.Listener):
+            def on_start(self, ev):
+                dispatcher = ev.data["dispatcher"]
+                outer.compiled.append(f"{dispatcher.py_func.__module__}."
+                                      f"{dispatcher.py_func.__qualname__}{ev.data['args']}")
+
+            def on_end(self, ev):
+                pass
+
+        self.compiled = []
+        event.register("numba:compile", Listener())
+
+
+async def exercise(client, log):
+    """Send every request; returns how many.  Raises on an unexpected answer."""
+    sent = 0
+
+    async def call(what, method, path, body=b"", content_type=None, accept=None, query=None,
+                   ok=(200, 201)):
+        nonlocal sent
+        status, media, data = await client.request(method, path, body, content_type, accept,
+                                                    query)
+        sent += 1
+        if status not in ok:
+            raise RuntimeError(f"{what}: {method} {path} answered {status}: {data[:500]!r}")
+        if accept == NPY and media != NPY:
+            raise RuntimeError(f"{what}: asked for .npy, got {media}")
+        return data
+
+    deadline = time.monotonic() + 600
+    while (await client.request("GET", "/readyz"))[0] != 200:
+        if time.monotonic() > deadline:
+            raise RuntimeError("/readyz did not answer 200 within 600 s")
+        await asyncio.sleep(0.1)
+    await call("healthz", "GET", "/healthz")
+    vertices, faces = icosphere(2)
+    mesh = json.loads(await call("upload obj", "POST", "/v1/meshes", obj_bytes(vertices, faces),
+                                 "model/obj"))
+    body, form = multipart("file", "sphere.stl", stl_bytes(*icosphere(1)))
+    await call("upload stl form", "POST", "/v1/meshes", body, form)
+    await call("get mesh", "GET", f"/v1/meshes/{mesh['id']}")
+    for number, (dtype, spec) in enumerate(scenes(mesh["id"])):
+        started = len(log.compiled)
+        scene = json.loads(await call(f"scene {number}", "POST", "/v1/scenes",
+                                      json.dumps(spec).encode(), "application/json"))
+        path = f"/v1/scenes/{scene['id']}"
+        for what, body, content_type, accept, query in intersect_requests(number):
+            await call(f"scene {number} {what}", "POST", f"{path}/intersect", body,
+                       content_type, accept, query)
+        for request in render_requests():
+            png = await call(f"scene {number} render {request}", "POST", f"{path}/render",
+                             json.dumps(request).encode(), "application/json")
+            if not png.startswith(b"\x89PNG\r\n\x1a\n"):
+                raise RuntimeError(f"render {request} is not a PNG")
+        print(f"  scene {number} ({dtype}, {len(spec['objects'])} objects): "
+              f"{len(log.compiled) - started} compilations", flush=True)
+    await call("demo render", "POST", "/v1/scenes/demo/render",
+               json.dumps({"camera": {"type": "perspective", "position": [7, 5, -9],
+                                      "look_at": [0, 1, 0], "width": 32, "height": 24}}).encode(),
+               "application/json")
+    return sent
+
+
+def run(check):
+    log = CompileLog()
+    from service.app import create_app
+
+    async def main():
+        async with AsgiClient(create_app()) as client:
+            return await exercise(client, log)
+
+    started = time.perf_counter()
+    sent = asyncio.run(main())
+    seconds = time.perf_counter() - started
+    print(f"{'check' if check else 'warm'}: {sent} requests in {seconds:.1f} s, "
+          f"{len(log.compiled)} functions compiled", flush=True)
+    if check and log.compiled:
+        print("compiled although the cache should hold them:\n  " + "\n  ".join(log.compiled),
+              file=sys.stderr)
+        return 1
+    return 0
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--check", action="store_true",
+                        help="only check that nothing compiles (the cache is warm)")
+    args = parser.parse_args(argv)
+    print(f"NUMBA_CACHE_DIR={os.environ.get('NUMBA_CACHE_DIR', '(unset: next to the sources)')}",
+          flush=True)
+    if args.check:
+        return run(check=True)
+    if run(check=False):
+        return 1
+    # a fresh interpreter: nothing loaded, so every kernel must come from the disk cache
+    return subprocess.call([sys.executable, os.path.abspath(__file__), "--check"])
+
+
+if __name__ == "__main__":
+    sys.exit(main())
