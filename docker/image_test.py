@@ -26,6 +26,7 @@ import contextlib
 import http.client
 import json
 import os
+import re
 import shutil
 import signal
 import socket
@@ -53,6 +54,14 @@ class TestFailed(Exception):
 
 def log(message):
     print(f"==> {message}", flush=True)
+
+
+PASSED = []
+
+
+def passed(what):
+    PASSED.append(what)
+    print(f"ok {len(PASSED)} - {what}", flush=True)
 
 
 def run(command, timeout, **kwargs):
@@ -150,6 +159,22 @@ def image_config(tag):
 # ----------------------------------------------------------------------------- the container
 
 
+def remove_stale_containers():
+    """Containers of an earlier run that was killed: their servers, mounts and layers."""
+    names = output(["podman", "ps", "--all", "--filter", "name=^raycore-image-test-",
+                    "--format", "{{.Names}}"]).split()
+    for name in names:
+        root = output(["podman", "mount", name])
+        for entry in Path("/proc").iterdir():
+            with contextlib.suppress(OSError, ValueError):
+                if entry.name.isdigit() and os.readlink(entry / "root") == root:
+                    os.kill(int(entry.name), signal.SIGKILL)
+        unmount_below(root)
+        subprocess.run(["podman", "rm", "--force", name], stdout=subprocess.DEVNULL,
+                       check=False)
+        log(f"removed {name}, left by an earlier run")
+
+
 class Container:
     """The image's filesystem, writable, with /proc and the usual /dev nodes: chroot runs in it."""
 
@@ -232,7 +257,8 @@ class Server:
                 with contextlib.suppress(ProcessLookupError):
                     os.killpg(self.process.pid, signal.SIGKILL)
                 self.process.wait()
-                raise TestFailed(f"the server did not stop within {timeout} s of SIGTERM")
+                raise TestFailed(f"the server did not stop within {timeout} s of SIGTERM") \
+                    from None
         with contextlib.suppress(ProcessLookupError):  # workers left behind, if any
             os.killpg(self.process.pid, signal.SIGKILL)
         self.log_file.close()
@@ -242,6 +268,17 @@ class Server:
         if not self.log_file.closed:
             self.log_file.flush()
         return Path(self.log_path).read_text(errors="replace")[-6000:]
+
+    def memory(self):
+        """Resident memory of each process of the server, in MiB, as text."""
+        sizes = []
+        for pid, _ in sorted(self.processes()):
+            with contextlib.suppress(OSError):
+                status = Path(f"/proc/{pid}/status").read_text()
+                rss = next((int(line.split()[1]) for line in status.splitlines()
+                            if line.startswith("VmRSS:")), 0)
+                sizes.append(f"{rss / 1024:.0f}")
+        return " + ".join(sizes) + " MiB"
 
     def processes(self):
         """(pid, uid) of the server's process group."""
@@ -267,6 +304,7 @@ def check_clean_stop(server, code):
     if code not in (0, -signal.SIGTERM) or "Application shutdown complete" not in server.output():
         raise TestFailed(f"the server did not shut down cleanly on SIGTERM (exit {code})\n"
                          + server.output())
+    passed("the server shuts down cleanly on SIGTERM")
 
 
 def free_port():
@@ -334,21 +372,22 @@ def icosphere(subdivisions, center=(0.0, 0.0, 0.0), radius=1.0):
         return tuple(c / length for c in v)
 
     vertices = [unit(v) for v in vertices]
+    midpoints = {}  # vertex pair -> index of the vertex between them
+
+    def middle(a, b):
+        key = (min(a, b), max(a, b))
+        if key not in midpoints:
+            vertices.append(unit([p + q for p, q in zip(vertices[a], vertices[b], strict=True)]))
+            midpoints[key] = len(vertices) - 1
+        return midpoints[key]
+
     for _ in range(subdivisions):
-        midpoints, refined = {}, []
-
-        def middle(a, b):
-            key = (min(a, b), max(a, b))
-            if key not in midpoints:
-                vertices.append(unit([p + q for p, q in zip(vertices[a], vertices[b])]))
-                midpoints[key] = len(vertices) - 1
-            return midpoints[key]
-
+        refined = []
         for a, b, c in faces:
             ab, bc, ca = middle(a, b), middle(b, c), middle(c, a)
             refined += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
         faces = refined
-    vertices = [tuple(o + radius * c for o, c in zip(center, v)) for v in vertices]
+    vertices = [tuple(o + radius * c for o, c in zip(center, v, strict=True)) for v in vertices]
     return vertices, faces
 
 
@@ -445,6 +484,7 @@ def exercise(client):
                       obj_file(vertices, faces), "model/obj")
         check(info["faces"] == len(faces) and info["closed"], f"mesh info {info}")
         meshes.append(info["id"])
+    passed("OBJ meshes upload")
 
     def shift(x):
         return [[1, 0, 0, x], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
@@ -469,6 +509,7 @@ def exercise(client):
                           spec(dtype, mesh, instance_x))
             check(len(info["geom_ids"]) == 5, f"scene info {info}")
         scenes[dtype] = info
+    passed("scenes build, float32 and float64, from uploaded meshes, instances and shapes")
 
     xs = [-4.0, 0.0, 4.0, 10.0, -10.0] * 40  # 200 rays: three objects hit, two misses
     for dtype, scene in scenes.items():
@@ -480,7 +521,8 @@ def exercise(client):
             answer = client(f"POST intersect JSON, closest+normal ({dtype})", "POST", path,
                             {"origins": origins, "directions": directions,
                              "fields": ["normal"]})
-            for x, t, geom, normal in zip(xs, answer["t"], answer["geom_id"], answer["normal"]):
+            for x, t, geom, normal in zip(xs, answer["t"], answer["geom_id"], answer["normal"],
+                                          strict=True):
                 check(geom == expected[x], f"{dtype}: ray at x={x} hit geometry {geom}, "
                                            f"expected {expected[x]}")
                 if geom == -1:
@@ -489,10 +531,11 @@ def exercise(client):
                     check(8.9 < t < 9.6 and normal[2] < -0.5, f"ray at x={x}: t={t}, n={normal}")
             table = read_npy_table(client(f"POST intersect .npy, closest+normal ({dtype})",
                                           "POST", path + "?fields=normal",
-                                          npy_rays([o + d for o, d in zip(origins, directions)]),
+                                          npy_rays([o + d for o, d in
+                                                    zip(origins, directions, strict=True)]),
                                           NPY, accept=NPY))
             check(table["geom_id"] == answer["geom_id"], "the .npy answer's ids differ from JSON")
-            for t_npy, t_json in zip(table["t"], answer["t"]):
+            for t_npy, t_json in zip(table["t"], answer["t"], strict=True):
                 check((t_json is None and t_npy == float("inf")) or
                       (t_json is not None and abs(t_npy - t_json) <= 1e-6 * t_json),
                       f".npy t {t_npy} differs from JSON t {t_json}")
@@ -501,18 +544,28 @@ def exercise(client):
                             "query": "all"})
             # through the front and back of each object, then the box behind the mesh
             check(every["counts"] == [2, 4, 2, 0, 0], f"all hits: counts {every['counts']}")
+    passed("ray batches, JSON and .npy, closest and all hits: the expected hits, equal answers")
 
     cameras = [{"type": "perspective", "position": [0, 3, -12], "look_at": [0, 0, 0],
                 "fov": 50, "width": 160, "height": 120},
                {"type": "orthographic", "position": [0, 0, -10], "look_at": [0, 0, 0],
                 "view_height": 6, "width": 200, "height": 90}]
     for dtype, scene in scenes.items():
-        for camera, shading in zip(cameras, ("lambert", "normal")):
+        for camera, shading in zip(cameras, ("lambert", "normal"), strict=True):
             png = client(f"POST render, PNG ({dtype})", "POST",
                          f"/v1/scenes/{scene['id']}/render", {"camera": camera, "shading": shading})
             size = decode_png(png)
             check(size == (camera["width"], camera["height"]),
                   f"the PNG is {size}, asked for {camera['width']}x{camera['height']}")
+    passed("renders are PNGs that decode to the requested size")
+
+
+def print_timings(timings, title):
+    print(f"\n{title:<46} {'first':>9} {'second':>9}")
+    for kind, seconds in timings.items():
+        second = f"{seconds[1] * 1000:6.0f} ms" if len(seconds) > 1 else ""
+        print(f"{kind:<46} {seconds[0] * 1000:6.0f} ms {second:>9}")
+    print(flush=True)
 
 
 def numba_cache_dir(config):
@@ -532,19 +585,22 @@ def test_single_worker(container, work):
     server = Server(container, {"RAYCORE_DEMO": "false"}, work / "server.log")
     try:
         startup = server.wait_healthy()
-        log(f"/healthz answered {startup:.1f} s after the start")
+        passed(f"/healthz answers, {startup:.1f} s after the start")
         users = {uid for _, uid in server.processes()}
         expected_uid = config["user"].split(":")[0]
         if users != {expected_uid}:
             raise TestFailed(f"the server runs as uid {users}, the image says {expected_uid}")
+        passed(f"the server runs as uid {expected_uid}")
         test = config["healthcheck"]["Test"]
         argv = ["/bin/sh", "-c", test[1]] if test[0] == "CMD-SHELL" else test[1:]
         check = container.command(argv, {
             "UVICORN_HOST": "127.0.0.1", "UVICORN_PORT": str(server.port)})
         if subprocess.run(check, timeout=60).returncode != 0:
             raise TestFailed("the image's HEALTHCHECK failed on a healthy server")
+        passed("the image's HEALTHCHECK passes")
         client = Client(server.url)
         exercise(client)
+        log(f"resident memory after the requests: {server.memory()}")
     except BaseException:
         print(server.output(), file=sys.stderr)
         raise
@@ -553,33 +609,77 @@ def test_single_worker(container, work):
     check_clean_stop(server, code)
     if subprocess.run(check, timeout=60, stderr=subprocess.DEVNULL).returncode == 0:
         raise TestFailed("the image's HEALTHCHECK passed with the server stopped")
+    passed("the image's HEALTHCHECK fails once the server is stopped")
 
-    print(f"\n{'request (fresh container, uid ' + expected_uid + ')':<44} {'first':>9} "
-          f"{'second':>9}")
-    for kind, seconds in client.timings.items():
-        second = f"{seconds[1] * 1000:7.0f} ms" if len(seconds) > 1 else ""
-        print(f"{kind:<44} {seconds[0] * 1000:6.0f} ms {second:>9}")
-    print(flush=True)
+    print_timings(client.timings, f"request (fresh container, uid {expected_uid})")
     after = container.snapshot(cache_dir)
     changed = sorted(name for name in set(before) | set(after) if before.get(name) !=
                      after.get(name))
     if changed:
         raise TestFailed("the service compiled kernels at run time; Numba cache files written: "
                          + ", ".join(changed[:20]))
-    log(f"Numba's cache is untouched: every kernel came from the image ({len(after)} files)")
+    passed(f"Numba's cache is untouched: every kernel came from the image ({len(after)} files)")
     slow = {kind: s[0] for kind, s in client.timings.items() if s[0] > FIRST_REQUEST_LIMIT_S}
     if slow:
         raise TestFailed(f"first requests slower than {FIRST_REQUEST_LIMIT_S} s: {slow}")
+    passed(f"every first request answered within {FIRST_REQUEST_LIMIT_S:.0f} s")
 
 
-def test_two_workers(container, work):
-    log("the same image with UVICORN_WORKERS=2")
-    server = Server(container, {"RAYCORE_DEMO": "false", "UVICORN_WORKERS": "2"},
-                    work / "server-workers.log")
+#: Run with the image's Python: docker/compose.yaml as JSON, and the service's setting names.
+_READ_COMPOSE = ("import dataclasses, json, sys, yaml; from service.config import Settings; "
+                 "print(json.dumps({'compose': yaml.safe_load(sys.stdin), "
+                 "'settings': [field.name for field in dataclasses.fields(Settings)]}))")
+
+
+def compose_environment(container):
+    """docker/compose.yaml's service environment, checked against the image and the service,
+    with ``${NAME:-default}`` resolved to the defaults (unset entries left out)."""
+    read = subprocess.run(container.command(["python", "-c", _READ_COMPOSE], {}), check=True,
+                          input=(REPO / "docker/compose.yaml").read_text(), text=True,
+                          capture_output=True, timeout=120)
+    parsed = json.loads(read.stdout)
+    services = parsed["compose"]["services"]
+    if list(services) != ["raycore"]:
+        raise TestFailed(f"compose.yaml: expected the one service raycore, got {list(services)}")
+    service = services["raycore"]
+
+    def resolve(value):
+        return re.sub(r"\$\{\w+(?::?-([^}]*))?\}", lambda match: match.group(1) or "",
+                      str(value))
+
+    build = service["build"]
+    if (REPO / "docker" / build["context"]).resolve() != REPO or \
+            build["dockerfile"] != "docker/Dockerfile":
+        raise TestFailed(f"compose.yaml builds {build}, not docker/Dockerfile from the repo")
+    image_port = container.config["env"].get("UVICORN_PORT")
+    ports = [resolve(port).rsplit(":", 1)[-1] for port in service["ports"]]
+    if ports != [image_port]:
+        raise TestFailed(f"compose.yaml publishes container ports {ports}, the image listens "
+                         f"on {image_port}")
+    environment = {name: resolve(value) for name, value in service["environment"].items()
+                   if value is not None}
+    unknown = [name for name in service["environment"] if name.startswith("RAYCORE_")
+               and name[len("RAYCORE_"):].lower() not in parsed["settings"]]
+    if unknown:
+        raise TestFailed(f"compose.yaml sets {unknown}, which the service does not read")
+    passed("compose.yaml builds docker/Dockerfile, publishes the image's port, sets only "
+           "settings the service reads")
+    return environment
+
+
+def test_compose_workers(container, work):
+    environment = {**compose_environment(container), "UVICORN_WORKERS": "2"}
+    log("docker/compose.yaml's environment, with UVICORN_WORKERS=2: " +
+        " ".join(f"{name}={value}" for name, value in environment.items()))
+    server = Server(container, environment, work / "server-compose.log")
     try:
         startup = server.wait_healthy()
-        deadline = time.monotonic() + 120
-        # the supervisor and two workers (and multiprocessing's helper, if any)
+        deadline = time.monotonic() + 180
+        while request(server.url, "GET", "/readyz")[0] != 200:  # the demo scene, per worker
+            if time.monotonic() > deadline:
+                raise TestFailed("/readyz did not answer 200 within 180 s")
+            time.sleep(0.2)
+        # the supervisor and two workers (and multiprocessing's helper)
         while len(server.processes()) < 3 and time.monotonic() < deadline:
             time.sleep(0.2)
         processes = server.processes()
@@ -587,6 +687,13 @@ def test_two_workers(container, work):
             raise TestFailed(f"expected a supervisor and two workers, found {processes}")
         # one keep-alive connection stays with one worker, whose store holds the scene
         connection = http.client.HTTPConnection(server.url, timeout=120)
+        camera = {"type": "perspective", "position": [7, 5, -9], "look_at": [0, 1, 0],
+                  "width": 64, "height": 48}
+        status, _, png = request(server.url, "POST", "/v1/scenes/demo/render",
+                                 json.dumps({"camera": camera}).encode(), "application/json",
+                                 connection=connection)
+        if status != 200 or decode_png(png) != (64, 48):
+            raise TestFailed(f"the demo render answered {status}: {png[:300]!r}")
         spec = {"objects": [{"type": "sphere", "center": [0, 0, 0], "radius": 1}]}
         status, _, body = request(server.url, "POST", "/v1/scenes", json.dumps(spec).encode(),
                                   "application/json", connection=connection)
@@ -600,13 +707,28 @@ def test_two_workers(container, work):
         if status != 200 or json.loads(body)["t"] != [4.0]:
             raise TestFailed(f"intersect answered {status}: {body[:300]!r}")
         connection.close()
-        log(f"{len(processes)} processes, healthy after {startup:.1f} s, answering")
+        passed(f"two workers: {len(processes)} processes ({server.memory()}), healthy after "
+               f"{startup:.1f} s, ready, render the demo, answer queries")
     except BaseException:
         print(server.output(), file=sys.stderr)
         raise
     finally:
         code = server.stop()
     check_clean_stop(server, code)
+
+
+def show_cold_start(container, work):
+    """For comparison: the first requests with an empty Numba cache (they compile)."""
+    log("for comparison: the same requests with an empty Numba cache (compiling)")
+    server = Server(container, {"RAYCORE_DEMO": "false", "NUMBA_CACHE_DIR": "/tmp/numba-cold"},
+                    work / "server-cold.log")
+    try:
+        server.wait_healthy()
+        client = Client(server.url)
+        exercise(client)
+    finally:
+        check_clean_stop(server, server.stop())
+    print_timings(client.timings, "request (empty Numba cache)")
 
 
 def main(argv=None):
@@ -620,6 +742,8 @@ def main(argv=None):
                              f"{DEBIAN_MIRROR})")
     parser.add_argument("--tag", default=IMAGE, help=f"the image to build (default {IMAGE})")
     parser.add_argument("--no-build", action="store_true", help="test the image --tag as it is")
+    parser.add_argument("--cold", action="store_true",
+                        help="also time the requests with an empty Numba cache, for comparison")
     args = parser.parse_args(argv)
     if os.geteuid() != 0:
         print("image-test needs root (chroot, mount, podman's root storage)", file=sys.stderr)
@@ -629,7 +753,10 @@ def main(argv=None):
             print(f"image-test needs {tool} (apt-get install podman debootstrap)", file=sys.stderr)
             return 2
     started = time.monotonic()
+    # a CI timeout's SIGTERM unwinds like an error: the server is stopped, mounts are undone
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
     try:
+        remove_stale_containers()
         if not args.no_build:
             base = args.base or BASE_IMAGE
             if args.base is None and (args.rebuild_base or not image_exists(BASE_IMAGE)):
@@ -637,23 +764,29 @@ def main(argv=None):
             elif args.base is None:
                 log(f"base image {BASE_IMAGE} exists: reused (--rebuild-base makes it again)")
             build_image(base, args.tag)
+            passed("the image builds; its Numba cache is warm (checked in a fresh process)")
         config = image_config(args.tag)
         if config["user"].split(":")[0] in ("", "0", "root"):
             raise TestFailed(f"the image runs as {config['user']!r}, not as a non-root user")
         if not config["healthcheck"] or not config["healthcheck"].get("Test"):
             raise TestFailed("the image has no HEALTHCHECK")
+        passed(f"the image runs as user {config['user']} and has a HEALTHCHECK")
         with contextlib.ExitStack() as stack, tempfile.TemporaryDirectory(
                 prefix="raycore-image-test-", dir="/var/tmp") as work:
             container = Container(args.tag, config, stack)
             test_single_worker(container, Path(work))
-            test_two_workers(container, Path(work))
+            test_compose_workers(container, Path(work))
+            if args.cold:
+                show_cold_start(container, Path(work))
         # the image is kept (its layers are the next build's cache); older builds' are not
         subprocess.run(["podman", "image", "prune", "--force"], stdout=subprocess.DEVNULL,
                        check=False)
     except (TestFailed, subprocess.CalledProcessError, subprocess.TimeoutExpired) as error:
         print(f"image-test FAILED: {error}", file=sys.stderr)
+        print(f"image-test: {len(PASSED)} passed, 1 failed", flush=True)
         return 1
     log(f"image-test passed in {time.monotonic() - started:.0f} s")
+    print(f"image-test: {len(PASSED)} passed, 0 failed", flush=True)
     return 0
 
 
