@@ -140,8 +140,9 @@ def build_image(base, tag):
         if os.environ.get(name):
             command += ["--build-arg", f"{name}={os.environ[name]}"]
     started = time.monotonic()
-    # the dependencies' stage gets a tag of its own, so that pruning old builds keeps it cached
-    run(command + ["--target", "deps", "--tag", f"{tag}-deps", str(REPO)], timeout=3600)
+    # the first stages get tags of their own, so that pruning old builds keeps them cached
+    for stage in ("deps", "wheel"):
+        run(command + ["--target", stage, "--tag", f"{tag}-{stage}", str(REPO)], timeout=3600)
     run(command + ["--tag", tag, str(REPO)], timeout=3600)
     log(f"image {tag} built in {time.monotonic() - started:.0f} s")
 
