@@ -672,6 +672,8 @@ def test_compose_workers(container, work):
     environment = {**compose_environment(container), "UVICORN_WORKERS": "2"}
     log("docker/compose.yaml's environment, with UVICORN_WORKERS=2: " +
         " ".join(f"{name}={value}" for name, value in environment.items()))
+    cache_dir = numba_cache_dir(container.config)
+    before = container.snapshot(cache_dir)
     server = Server(container, environment, work / "server-compose.log")
     try:
         startup = server.wait_healthy()
@@ -716,6 +718,9 @@ def test_compose_workers(container, work):
     finally:
         code = server.stop()
     check_clean_stop(server, code)
+    if container.snapshot(cache_dir) != before:
+        raise TestFailed("with compose.yaml's environment the service compiled kernels")
+    passed("with compose.yaml's environment too, Numba's cache is untouched")
 
 
 def show_cold_start(container, work):
