@@ -113,17 +113,18 @@ def icosphere(subdivisions=1):
              [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
              [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]
     vertices = [np.array(v, float) / np.linalg.norm(v) for v in vertices]
+    midpoints = {}  # vertex pair -> index of the vertex between them
+
+    def middle(a, b):
+        key = (min(a, b), max(a, b))
+        if key not in midpoints:
+            point = vertices[a] + vertices[b]
+            vertices.append(point / np.linalg.norm(point))
+            midpoints[key] = len(vertices) - 1
+        return midpoints[key]
+
     for _ in range(subdivisions):
-        midpoints, refined = {}, []
-
-        def middle(a, b):
-            key = (min(a, b), max(a, b))
-            if key not in midpoints:
-                point = vertices[a] + vertices[b]
-                vertices.append(point / np.linalg.norm(point))
-                midpoints[key] = len(vertices) - 1
-            return midpoints[key]
-
+        refined = []
         for a, b, c in faces:
             ab, bc, ca = middle(a, b), middle(b, c), middle(c, a)
             refined += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
