@@ -64,12 +64,22 @@ class Scene:
         self._visible = []
         self._params = []  # (20,) float64 rows of analytic shapes
         self._xforms = []  # (3, 4) float64 object-from-world matrices of instances
-        self._instance_bounds = {}  # object -> (lo, hi) in world space
+        self._placement = {}  # instance object -> (4x4 world-from-object matrix, world bounds)
         self._packed = None
         self._top = None
         self.build_seconds = 0.0
 
     # ------------------------------------------------------------------ geometry
+
+    def _fits(self, values, names):
+        """Return ``values``, or raise ``ValueError`` naming ``names`` when they overflow the
+        scene's precision (a float32 scene cannot hold 1e39, nor a radius whose square is)."""
+        with np.errstate(over="ignore"):
+            stored = np.asarray(values).astype(self.dtype)
+        if not np.all(np.isfinite(stored)):
+            raise ValueError(f"{names} overflow {np.dtype(self.dtype).name}: "
+                             "use a float64 scene or smaller values")
+        return values
 
     def _add_object(self, kind, *, params=None, mesh=-1, xform=None, visible=True):
         self._kind.append(kind)
@@ -96,6 +106,7 @@ class Scene:
             False makes the mesh a prototype that only appears through :meth:`add_instance`.
         """
         mesh = Mesh(vertices, faces)
+        self._fits(mesh.vertices, "vertices")
         self._meshes.append(mesh)
         return self._add_object(MESH, mesh=len(self._meshes) - 1, visible=bool(visible))
 
@@ -103,44 +114,52 @@ class Scene:
         """Place another copy of mesh ``geom_id`` under a 4x4 affine ``transform``; return its id.
 
         The copy shares the mesh's vertices and BVH: memory does not grow with the mesh's size.
+        ``geom_id`` may itself be an instance: the copy is then placed at ``transform`` applied
+        after that instance's own transform.
         """
         if not (isinstance(geom_id, (int, np.integer)) and 0 <= geom_id < len(self._kind)
                 and self._kind[geom_id] == MESH):
             raise ValueError(f"geom_id must be the id of a mesh in this scene, got {geom_id!r}")
         matrix = validate_transform(transform)
+        if geom_id in self._placement:
+            matrix = matrix @ self._placement[geom_id][0]
         mesh_index = self._mesh_of[geom_id]
-        obj = self._add_object(MESH, mesh=mesh_index, xform=np.linalg.inv(matrix)[:3])
-        self._instance_bounds[obj] = self._meshes[mesh_index].transformed_bounds(matrix)
+        inverse = self._fits(np.linalg.inv(matrix)[:3], "transform (its inverse)")
+        obj = self._add_object(MESH, mesh=mesh_index, xform=inverse)
+        self._placement[obj] = (matrix, self._meshes[mesh_index].transformed_bounds(matrix))
         return obj
+
+    def _add_shape(self, kind, params, names):
+        return self._add_object(kind, params=self._fits(params, names))
 
     def add_sphere(self, center, radius):
         """Add a sphere; return its geometry id."""
-        return self._add_object(analytic.SPHERE, params=sphere.pack(center, radius))
+        return self._add_shape(analytic.SPHERE, sphere.pack(center, radius), "center, radius")
 
     def add_plane(self, point, normal):
         """Add an infinite plane through ``point`` with ``normal``; return its geometry id."""
-        return self._add_object(analytic.PLANE, params=plane.pack(point, normal))
+        return self._add_shape(analytic.PLANE, plane.pack(point, normal), "point, normal")
 
     def add_disk(self, center, normal, radius):
         """Add a disk; return its geometry id."""
-        return self._add_object(analytic.DISK, params=disk.pack(center, normal, radius))
+        return self._add_shape(analytic.DISK, disk.pack(center, normal, radius),
+                               "center, normal, radius")
 
     def add_box(self, lo, hi, transform=None):
         """Add an axis-aligned box [lo, hi], optionally under a 4x4 affine ``transform``."""
         if transform is None:
-            return self._add_object(analytic.BOX, params=box.pack(lo, hi))
-        return self._add_object(analytic.TRANSFORMED_BOX,
-                                params=box.pack_transformed(lo, hi, transform))
+            return self._add_shape(analytic.BOX, box.pack(lo, hi), "lo, hi")
+        return self._add_shape(analytic.TRANSFORMED_BOX, box.pack_transformed(lo, hi, transform),
+                               "lo, hi, transform")
 
     def add_cylinder(self, p0, p1, radius):
         """Add a cylinder from ``p0`` to ``p1``, capped at both ends; return its geometry id."""
-        return self._add_object(analytic.CYLINDER,
-                                params=cylinder.pack(p0, p1, radius))
+        return self._add_shape(analytic.CYLINDER, cylinder.pack(p0, p1, radius), "p0, p1, radius")
 
     def add_cone(self, base_center, apex, radius):
         """Add a cone with its base (capped) at ``base_center``; return its geometry id."""
-        return self._add_object(analytic.CONE,
-                                params=cone.pack(base_center, apex, radius))
+        return self._add_shape(analytic.CONE, cone.pack(base_center, apex, radius),
+                               "base_center, apex, radius")
 
     def __len__(self):
         return len(self._kind)
@@ -155,8 +174,8 @@ class Scene:
     def _object_bounds(self, obj):
         kind = self._kind[obj]
         if kind == MESH:
-            if obj in self._instance_bounds:
-                return self._instance_bounds[obj]
+            if obj in self._placement:
+                return self._placement[obj][1]
             return self._meshes[self._mesh_of[obj]].bounds
         # bound the shape as stored, in the scene's precision
         params = self._params[self._param_row[obj]].astype(self.dtype).astype(np.float64)

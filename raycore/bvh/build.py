@@ -36,14 +36,17 @@ class BuildParams:
     intersection_cost: float = 1.0
 
     def __post_init__(self):
-        if not 2 <= int(self.bins) <= 256:
-            raise ValueError(f"bins must be between 2 and 256, got {self.bins}")
-        if not 1 <= int(self.max_leaf_size) <= 255:
-            raise ValueError(f"max_leaf_size must be between 1 and 255, got {self.max_leaf_size}")
+        for name, low, high in (("bins", 2, 256), ("max_leaf_size", 1, 255)):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or isinstance(value, bool):
+                raise ValueError(f"{name} must be an integer, got {value!r}")
+            if not low <= value <= high:
+                raise ValueError(f"{name} must be between {low} and {high}, got {value}")
         for name in ("traversal_cost", "intersection_cost"):
             value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be positive and finite, got {value}")
+            if not (isinstance(value, (int, float, np.integer, np.floating))
+                    and not isinstance(value, bool) and np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be positive and finite, got {value!r}")
 
 
 @njit(cache=True, inline="always")

@@ -18,7 +18,7 @@ from numba import njit
 
 from raycore._fp import gamma, like
 from raycore.bvh.build import MAX_DEPTH
-from raycore.bvh.layout import LEFT_COUNT, LEFT_REF
+from raycore.bvh.layout import LEFT_REF
 from raycore.primitives.analytic import analytic_hit
 from raycore.primitives.triangle import triangle_hit, watertight_setup
 

@@ -28,6 +28,8 @@ a shape module, delete the ``*.nbi`` / ``*.nbc`` files of this module (and of an
 from ``__pycache__``, or the old kernels keep running.
 """
 
+import math
+
 import numpy as np
 from numba import njit, prange
 
@@ -141,7 +143,27 @@ def analytic_bounds(kind, params):
 
 @njit(cache=True, error_model="numpy")
 def analytic_hit(kind, params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
-    """Nearest hit of one ray with the shape ``kind``: ``(t, part)``, ``(inf, -1)`` on a miss."""
+    """Nearest hit of one ray with the shape ``kind``: ``(t, part)``, ``(inf, -1)`` on a miss.
+
+    The quadrics square the direction, which overflows (or underflows) float32 for lengths
+    beyond 2**±63; such a direction is first scaled by a power of two, which is exact, and t
+    scaled back.
+    """
+    _, exponent = math.frexp(max(abs(dx), abs(dy), abs(dz)))
+    if abs(exponent) > DIRECTION_EXPONENT_LIMIT:
+        t, part = _analytic_hit(kind, params, ox, oy, oz, math.ldexp(dx, -exponent),
+                                math.ldexp(dy, -exponent), math.ldexp(dz, -exponent),
+                                math.ldexp(tmin, exponent), math.ldexp(tmax, exponent), method)
+        return (math.ldexp(t, -exponent) if part >= 0 else t), part
+    return _analytic_hit(kind, params, ox, oy, oz, dx, dy, dz, tmin, tmax, method)
+
+
+#: Directions whose largest component is below 2**-limit or at least 2**limit are rescaled.
+DIRECTION_EXPONENT_LIMIT = 20
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _analytic_hit(kind, params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
     if kind == SPHERE:
         return sphere.hit(params, ox, oy, oz, dx, dy, dz, tmin, tmax, method)
     if kind == PLANE:

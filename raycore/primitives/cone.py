@@ -27,7 +27,7 @@ runs along the axis from 0 at the base to 1 at the apex.  Base: polar, as the di
 
 import numpy as np
 
-from raycore._fp import like
+from raycore._fp import gamma, like
 from raycore.primitives._common import (
     as_point,
     as_radius,
@@ -101,7 +101,21 @@ def _discriminant(fx, fy, fz, dx, dy, dz, wx, wy, wz, k2):
     my = fz * dx - fx * dz
     mz = fx * dy - fy * dx
     mw, qx, qy, qz = axial_split(mx, my, mz, wx, wy, wz)
-    return k2 * dot(qx, qy, qz, qx, qy, qz) - mw * mw
+    disc = k2 * dot(qx, qy, qz, qx, qy, qz) - mw * mw
+    # A ray through (or within rounding of) the apex has m ≈ 0 and a discriminant whose sign is
+    # rounding noise; a negative one would let it slip between the nappes.  A negative value
+    # within the error bound counts as 0, a tangent.  Each component of m is off by at most
+    # γ(3) times its two products (f itself was rounded once), which bounds the error of disc.
+    if disc < like(disc, 0.0):
+        g3 = gamma(3, fx)
+        error = g3 * (abs(fy * dz) + abs(fz * dy) + abs(fz * dx) + abs(fx * dz)
+                      + abs(fx * dy) + abs(fy * dx))
+        scale = k2 * (abs(qx) + abs(qy) + abs(qz)) + abs(mw)
+        bound = (like(fx, 2.0) * scale + (like(fx, 1.0) + k2) * error) * error + g3 * (
+            k2 * dot(qx, qy, qz, qx, qy, qz) + mw * mw)
+        if -disc <= bound:
+            disc = like(disc, 0.0)
+    return disc
 
 
 @inline_kernel
@@ -116,10 +130,16 @@ def hit(params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
     b = dot(fx, fy, fz, px, py, pz) - k2 * fw * dw
     c = dot(fx, fy, fz, fx, fy, fz) - k2 * fw * fw
     t0, t1 = stable_roots(a, b, c, _discriminant(gx, gy, gz, dx, dy, dz, wx, wy, wz, k2))
-    zero = like(ox, 0.0)
     t, part = miss(ox)
-    t, part = closer_on_side(t0, fw, dw, -params[9], zero, t, part, tmin, tmax)
-    t, part = closer_on_side(t1, fw, dw, -params[9], zero, t, part, tmin, tmax)
+    # Both nappes meet at the apex, where a root's axial coordinate s = fw + t dw is computed
+    # with a few roundings: a ray leaving through the apex can land on s > 0 by rounding alone.
+    # Accepting s up to that error keeps the apex closed; it admits nothing of the other nappe
+    # farther than rounding from the apex.
+    slack = gamma(4, ox)
+    t, part = closer_on_side(t0, fw, dw, -params[9], slack * (abs(fw) + abs(t0 * dw)), t, part,
+                             tmin, tmax)
+    t, part = closer_on_side(t1, fw, dw, -params[9], slack * (abs(fw) + abs(t1 * dw)), t, part,
+                             tmin, tmax)
     cap = disk_hit(params[0], params[1], params[2], wx, wy, wz, params[11], ox, oy, oz, dx, dy, dz)
     return closer(cap, 1, t, part, tmin, tmax)
 

@@ -342,8 +342,12 @@ def watertight(ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin, tmax, ax, ay, az, bx, b
         det, t_det, v_b, w_c = -det, -t_det, -v_b, -w_c
     if not (t_det >= tmin * det and t_det <= tmax * det):
         return _miss(ox)
+    t = t_det / det
+    # inf / inf when the edge functions overflow (coordinates near the top of the range)
+    if t != t:
+        return _miss(ox)
     # T/det can round one ulp past a bound that the product test accepted: clamp into range.
-    t = min(max(t_det / det, tmin), tmax)
+    t = min(max(t, tmin), tmax)
     return t, v_b / det, w_c / det
 
 

@@ -1,0 +1,41 @@
+"""Keep Numba's on-disk kernel cache consistent with the sources.
+
+Numba's cache (``cache=True``, stored in ``__pycache__`` beside each module) is keyed by the
+modification time of the decorated function's own file only.  A kernel that inlines code from
+another module (the traversal inlines every primitive) is therefore reloaded stale after that
+other module changes.  At import, raycore hashes its sources and, when they differ from the ones
+the cache was built from, drops its cached kernels so that they are compiled afresh.
+"""
+
+import hashlib
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parent
+STAMP = PACKAGE / "__pycache__" / "kernel-sources.sha256"
+
+
+def sources_digest():
+    """SHA-256 of every module of the package, with its path."""
+    digest = hashlib.sha256()
+    for path in sorted(PACKAGE.rglob("*.py")):
+        digest.update(str(path.relative_to(PACKAGE)).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def drop_stale_kernels():
+    """Delete the cached kernels if they were compiled from other sources than these."""
+    digest = sources_digest()
+    try:
+        if STAMP.read_text() == digest:
+            return
+    except OSError:
+        pass
+    try:
+        for cached in PACKAGE.rglob("__pycache__/*.nb[ic]"):
+            cached.unlink(missing_ok=True)
+        STAMP.parent.mkdir(exist_ok=True)
+        STAMP.write_text(digest)
+    except OSError:
+        # a read-only installation: Numba cannot write a cache there either
+        pass
