@@ -1,0 +1,72 @@
+"""Scene odds and ends: empty scenes, no rays, changes after a query, result types, bounds."""
+
+import numpy as np
+
+from raycore import AllHits, Hits, Scene
+
+RAYS = (np.zeros((3, 3)), np.array([[0.0, 0, 1], [0, 1, 0], [1, 0, 0]]))
+
+
+def test_an_empty_scene_misses_everything(dtype):
+    scene = Scene(dtype=dtype)
+    hits = scene.intersect(*RAYS, fields=("uv", "normal", "point"))
+    assert isinstance(hits, Hits) and hits.t.dtype == np.dtype(dtype)
+    assert np.all(hits.t == np.inf) and np.all(hits.geom_id == -1) and np.all(hits.prim_id == -1)
+    assert np.isnan(hits.uv).all() and np.isnan(hits.normal).all() and np.isnan(hits.point).all()
+    all_hits = scene.intersect_all(*RAYS)
+    assert isinstance(all_hits, AllHits) and len(all_hits) == 0
+    assert all_hits.counts.tolist() == [0, 0, 0]
+    assert not scene.occluded(*RAYS).any() and not scene.contains(RAYS[0]).any()
+    assert scene.stats()["objects"] == 0 and scene.triangle_count == 0
+    # invisible prototypes alone show nothing either
+    scene.add_mesh([[0, 0, 1], [1, 0, 1], [0, 1, 1]], [[0, 1, 2]], visible=False)
+    assert np.all(scene.intersect(*RAYS).geom_id == -1)
+
+
+def test_no_rays_give_empty_results(dtype):
+    scene = Scene(dtype=dtype)
+    scene.add_sphere([0, 0, 0], 1.0)
+    none = np.zeros((0, 3))
+    hits = scene.intersect(none, none, fields=("uv", "normal", "point"))
+    assert hits.t.shape == (0,) and hits.uv.shape == (0, 2) and hits.normal.shape == (0, 3)
+    assert hits.point.shape == (0, 3)
+    assert scene.intersect_all(none, none).counts.shape == (0,)
+    assert scene.count(none, none).shape == (0,) and scene.occluded(none, none).shape == (0,)
+    assert scene.contains(none).shape == (0,)
+
+
+def test_changes_after_a_query_are_seen(dtype):
+    scene = Scene(dtype=dtype)
+    plane = scene.add_plane([0, 0, 5], [0, 0, 1])  # unbounded: no top-level tree yet
+    assert scene.intersect(*RAYS).geom_id.tolist() == [plane, -1, -1]
+    sphere = scene.add_sphere([0, 0, 2], 1.0)
+    mesh = scene.add_mesh([[-1, 3, -1], [1, 3, -1], [0, 3, 1]], [[0, 1, 2]], visible=False)
+    swap = np.eye(4)
+    swap[:3, :3] = [[0, 1, 0], [1, 0, 0], [0, 0, 1]]  # swap x and y: the triangle lies at x = 3
+    instance = scene.add_instance(mesh, swap)
+    hits = scene.intersect(*RAYS)
+    assert hits.geom_id.tolist() == [sphere, -1, instance]
+    assert hits.t.tolist() == [1.0, np.inf, 3.0]
+    assert scene.count(*RAYS).tolist() == [3, 0, 1]
+    lo, hi = scene.bounds
+    assert np.all(lo <= [-1, -1, -1]) and np.all(hi >= [3, 1, 3])
+    assert len(scene) == 4
+
+
+def test_ids_are_the_add_order_and_results_have_fixed_types(dtype):
+    scene = Scene(dtype=dtype)
+    ids = [scene.add_sphere([0, 0, 3], 1.0), scene.add_box([-1, -1, 6], [1, 1, 7]),
+           scene.add_disk([0, 0, 9], [0, 0, 1], 1.0), scene.add_cylinder([0, 0, 11], [0, 0, 12], 1),
+           scene.add_cone([0, 0, 14], [0, 0, 15], 1.0),
+           scene.add_mesh([[-1, -1, 17], [1, -1, 17], [0, 1, 17]], [[0, 1, 2]]),
+           scene.add_plane([0, 0, 20], [0, 0, 1])]
+    assert ids == list(range(7))
+    all_hits = scene.intersect_all([[0, 0, 0]], [[0, 0, 1]])
+    # sphere, box, cylinder, cone: two crossings each; disk, mesh, plane: one
+    assert all_hits.geom_id.tolist() == [0, 0, 1, 1, 2, 3, 3, 4, 4, 5, 6]
+    assert all_hits.t.tolist() == [2, 4, 6, 7, 9, 11, 12, 14, 15, 17, 20]
+    assert all_hits.prim_id.tolist()[-2] == 0 and all_hits.prim_id.dtype == np.int64
+    assert all_hits.ray_index.dtype == np.int64 and all_hits.counts.dtype == np.int64
+    assert all_hits.offsets.tolist() == [0, 11]
+    hits = scene.intersect([[0, 0, 0]], [[0, 0, 1]], tmin=[4.5], tmax=[100.0])
+    assert hits.geom_id.tolist() == [1] and hits.t.tolist() == [6.0]
