@@ -131,9 +131,14 @@ def hit(params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
 def surface(params, ox, oy, oz, dx, dy, dz, t, part):
     """Unit outward normal and ``(u, v)`` (see the module docstring) at ``o + t d``."""
     # offset from the centre as (o - c) + t d: no cancellation of large coordinates
-    nx, ny, nz = normalized(
-        (ox - params[0]) + t * dx, (oy - params[1]) + t * dy, (oz - params[2]) + t * dz
-    )
+    ex = (ox - params[0]) + t * dx
+    ey = (oy - params[1]) + t * dy
+    ez = (oz - params[2]) + t * dz
+    if ex == 0 and ey == 0 and ez == 0:
+        # a sphere below the precision's resolution: the hit point rounds onto its centre, and
+        # the surface the ray met faces it
+        ex, ey, ez = -dx, -dy, -dz
+    nx, ny, nz = normalized(ex, ey, ez)
     u = azimuth(nx, ny)
     v = math.acos(min(max(nz, like(nz, -1.0)), like(nz, 1.0))) / like(nz, math.pi)
     return nx, ny, nz, u, clamp01(v)

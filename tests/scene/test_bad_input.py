@@ -322,11 +322,9 @@ def test_a_triangle_whose_arithmetic_overflows_never_gives_a_nan_hit():
         assert not np.isnan(scene.intersect_all(origins, directions, tmin, tmax).t).any()
 
 
-@pytest.mark.xfail(strict=True, reason="sphere surface: the hit point o + t d of a sphere "
-                   "smaller than the rounding of o rounds onto the centre, and the normal "
-                   "(p - c) / |p - c| and uv come back NaN at a hit (float32: radius 1e-8 seen "
-                   "from distance 1; raycore.primitives.sphere.surface)")
 def test_surface_fields_at_a_hit_are_never_nan():
+    """Regression: a sphere below float32's resolution at distance 1 (its hit point rounds onto
+    its centre) gave NaN normal and uv."""
     scene = Scene(dtype="float32")
     scene.add_sphere([0, 0, 0], 1e-8)
     hits = scene.intersect([[0, 0, -1]], [[0, 0, 1]], fields=("uv", "normal"))
