@@ -12,7 +12,7 @@
    as JSON and .npy, PNG renders, each kind of request twice, timed: the first request to the
    fresh container must not compile kernels.  Proof: the timings, and Numba's cache directory
    in the container is left exactly as the image had it (a compiled kernel would be written
-   there).  Then the same image with two uvicorn workers.
+   there).  Then the image with docker/compose.yaml's environment and two uvicorn workers.
 5. The server is stopped (SIGTERM, as a container engine does) and everything is unmounted and
    removed, also when a step fails.
 
