@@ -111,7 +111,9 @@ def _as_ray_array(value, name, dtype, count=None):
     if array.ndim != 2 or array.shape[1] != 3 or (count is not None and len(array) != count):
         expected = f"({'N' if count is None else count}, 3)"
         raise ValueError(f"{name} must have shape {expected}, got {array.shape}")
-    return np.ascontiguousarray(array, dtype=dtype)
+    # values beyond float32's range become inf here, and are refused as non-finite after
+    with np.errstate(over="ignore"):
+        return np.ascontiguousarray(array, dtype=dtype)
 
 
 def prepare_rays(origins, directions, tmin=0.0, tmax=np.inf, dtype=np.float64):
