@@ -30,6 +30,7 @@ test: $(VENV)/.dev-installed
 
 bench: $(VENV)/.bench-installed
 	$(BIN)/python -m benchmarks.run
+	$(BIN)/python -m benchmarks.service_bench
 
 # docs/speed-vs-accuracy.png and docs/model-what-you-need.png with their Markdown tables
 # (benchmarks/speed_accuracy.py).  The error figures come from tests/stability's catalogue and
