@@ -15,7 +15,7 @@ from raycore.mesh import load_trimesh
 from raycore.render import DEFAULT_COLOR
 from service.errors import ClientError, LimitExceeded
 from service.schemas import Bounds, MeshInfo, SceneInfo, SceneSpec
-from service.store import content_id
+from service.store import ENTRY_OVERHEAD, content_id
 
 #: File types trimesh reads for uploads.
 MESH_FORMATS = ("obj", "ply", "stl", "off", "glb")
@@ -31,7 +31,7 @@ class MeshEntry:
 
     @property
     def nbytes(self):
-        return self.vertices.nbytes + self.faces.nbytes
+        return self.vertices.nbytes + self.faces.nbytes + ENTRY_OVERHEAD
 
 
 @dataclass(frozen=True)
@@ -61,11 +61,23 @@ def parse_mesh(data, file_type, max_triangles):
         loaded = load_trimesh(io.BytesIO(data), file_type)
     except ValueError as error:
         raise ClientError(str(error)) from error
-    mesh = loaded.to_mesh() if isinstance(loaded, trimesh.Scene) else loaded
+    if isinstance(loaded, trimesh.Scene):
+        # count before flattening: a small file can place one mesh at a million nodes
+        placed = sum(len(getattr(loaded.geometry.get(name), "faces", ())) for name in
+                     (loaded.graph[node][1] for node in loaded.graph.nodes_geometry))
+        if placed > max_triangles:
+            raise LimitExceeded(f"the mesh file places {placed} triangles; the limit is "
+                                f"{max_triangles}")
+        for name, part in loaded.geometry.items():
+            _check_faces(part.vertices, part.faces, f"part {name!r}: ")
+        mesh = loaded.to_mesh()
+    else:
+        mesh = loaded
     vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
     faces = np.ascontiguousarray(mesh.faces, dtype=np.int64)
     if len(faces) > max_triangles:
         raise LimitExceeded(f"the mesh has {len(faces)} triangles; the limit is {max_triangles}")
+    _check_faces(vertices, faces)
     if not np.all(np.isfinite(vertices)):
         raise ClientError("the mesh's vertices must be finite (no NaN or inf)")
     # STL stores a triangle soup: merge equal vertices before asking whether edges are shared
@@ -75,6 +87,14 @@ def parse_mesh(data, file_type, max_triangles):
                     faces=len(faces), closed=closed,
                     bounds=Bounds(lo=used.min(axis=0).tolist(), hi=used.max(axis=0).tolist()))
     return MeshEntry(vertices, faces, info)
+
+
+def _check_faces(vertices, faces, where=""):
+    """ClientError unless every face index names a vertex (files can hold any integer)."""
+    faces = np.asarray(faces)
+    if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
+        raise ClientError(f"{where}the mesh's faces must index its {len(vertices)} vertices, got "
+                          f"indices in [{faces.min()}, {faces.max()}]")
 
 
 def scene_id(spec):
@@ -132,7 +152,8 @@ def build_scene(spec: SceneSpec, find_mesh, max_triangles):
         palette[geom] = color
     lo, hi = scene.bounds
     bounded = bool(np.all(lo <= hi))
-    held = scene.stats()["bytes"] + sum(m.nbytes for m in uploads.values()) + sum(
+    held = ENTRY_OVERHEAD + scene.stats()["bytes"] + sum(
+        m.nbytes for m in uploads.values()) + sum(
         24 * (len(obj.vertices) + len(obj.faces))
         for obj in spec.objects if obj.type == "mesh" and obj.mesh is None)
     info = SceneInfo(id=scene_id(spec), dtype=spec.dtype, objects=len(spec.objects),

@@ -50,7 +50,11 @@ def read_npy(body):
         raise BadRequest(f"the body is not a valid .npy file: {error}") from error
     if dtype.hasobject or dtype.kind != "f" or dtype.itemsize not in (4, 8):
         raise BadRequest(f"the .npy array must hold float32 or float64, got dtype {dtype.str}")
-    count = int(np.prod(shape, dtype=np.int64))
+    if any(size < 0 for size in shape):
+        raise BadRequest(f"the .npy header announces a negative size in its shape {shape}")
+    count = 1
+    for size in shape:  # Python integers: a lying header must not overflow int64
+        count *= size
     data = len(body) - stream.tell()
     if data != count * dtype.itemsize:
         raise BadRequest(f"the .npy header announces shape {shape} of {dtype.str} "

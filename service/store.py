@@ -11,6 +11,11 @@ from collections import OrderedDict
 
 from service.errors import LimitExceeded
 
+#: Bytes charged to every entry on top of its arrays: the Python objects around them (the
+#: Scene, its geometry records, the info models) take 5 to 20 kB even for a single sphere, so
+#: that without this charge a budget of arrays would let millions of tiny scenes in.
+ENTRY_OVERHEAD = 32 * 1024
+
 
 def content_id(*parts):
     """128-bit hex digest of byte strings (length-prefixed, so that parts cannot run together)."""
