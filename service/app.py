@@ -26,6 +26,11 @@ Upload meshes (`POST /v1/meshes`), build scenes from JSON (`POST /v1/scenes`), t
 batches at them (`POST /v1/scenes/{id}/intersect`, JSON or .npy both ways) or render PNGs
 (`POST /v1/scenes/{id}/render`).  Scene and mesh ids are content hashes; `demo` names a built-in
 scene.  Errors are answered as `{"detail": "..."}` with a 4xx status.
+
+When the service is configured with an API key (`RAYCORE_API_KEY`), the endpoints that change
+the store (uploads, scene builds, deletions) need it, as `X-API-Key: <key>` or
+`Authorization: Bearer <key>`, and answer 401 without it; queries, renders and descriptions
+need no key.
 """
 
 

@@ -4,6 +4,7 @@ Read from the environment once, by :func:`load_settings`, when the app is create
 :class:`Settings` directly.
 """
 
+import dataclasses
 import os
 from dataclasses import dataclass, fields
 
@@ -32,6 +33,9 @@ class Settings:
         is thread-safe (omp or tbb: the workqueue layer aborts on concurrent parallel kernels).
     demo : bool
         Build the demo scene (id ``demo``) at startup.
+    api_key : str or None
+        When set, uploads, scene builds and deletions need it (``X-API-Key`` or
+        ``Authorization: Bearer``) and are answered 401 without it.  Not shown by ``repr``.
     """
 
     max_rays: int = 2**21
@@ -41,6 +45,7 @@ class Settings:
     store_bytes: int = 2048 * MIB
     compute_slots: int = 1
     demo: bool = True
+    api_key: str | None = dataclasses.field(default=None, repr=False)
 
 
 def load_settings(environ=None):
@@ -54,13 +59,20 @@ def load_settings(environ=None):
     Raises
     ------
     ValueError
-        Naming the variable whose value is not a positive integer (or a boolean for ``DEMO``).
+        Naming the variable whose value is not a positive integer (or a boolean for ``DEMO``,
+        or a non-empty string for ``API_KEY``).
     """
     environ = os.environ if environ is None else environ
     values = {}
     for field in fields(Settings):
         name = f"RAYCORE_{field.name.upper()}"
         if name not in environ:
+            continue
+        if field.name == "api_key":
+            if not environ[name].strip():
+                # refused rather than read as "no key": a blank secret would open the service
+                raise ValueError(f"{name} must not be empty (unset it to need no key)")
+            values[field.name] = environ[name].strip()
             continue
         raw = environ[name].strip().lower()
         if field.type is bool:

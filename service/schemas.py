@@ -291,6 +291,9 @@ _ERROR_EXAMPLES = {
     400: ("The body cannot be decoded",
           {"detail": "the .npy header announces shape (1000, 8) of <f4 (32000 bytes), the body "
                      "holds 31996 bytes of data"}),
+    401: ("The API key is missing or wrong (only when the service is configured with one)",
+          {"detail": "this endpoint needs the API key: send it as X-API-Key or "
+                     "Authorization: Bearer"}),
     404: ("No such scene or mesh",
           {"detail": f"no scene '{EXAMPLE_SCENE_ID}' (it may have been evicted: send it again)"}),
     413: ("Over a configured limit",

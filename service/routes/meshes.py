@@ -5,6 +5,7 @@ from typing import Annotated
 
 from fastapi import APIRouter, Depends, Query, Request, Response
 
+from service.auth import require_api_key
 from service.builder import MESH_FORMATS, parse_mesh
 from service.errors import ClientError, UnsupportedMedia
 from service.runtime import Runtime, runtime
@@ -48,9 +49,9 @@ def _file_type(given, media_type, filename=None):
 
 
 @router.post("", status_code=201, response_model=MeshInfo, summary="Upload a mesh file",
-             openapi_extra={"requestBody": _UPLOAD_BODY},
+             openapi_extra={"requestBody": _UPLOAD_BODY}, dependencies=[Depends(require_api_key)],
              responses={200: {"model": MeshInfo, "description": "The same mesh was stored already"},
-                        **error_responses(413, 415, 422)})
+                        **error_responses(401, 413, 415, 422)})
 async def upload_mesh(request: Request, response: Response,
                       state: Annotated[Runtime, Depends(runtime)],
                       file_format: Annotated[str | None, Query(alias="format",
@@ -80,6 +81,6 @@ async def get_mesh(mesh_id: str, state: Annotated[Runtime, Depends(runtime)]):
 
 
 @router.delete("/{mesh_id}", status_code=204, summary="Forget an uploaded mesh",
-               responses=error_responses(404, 422))
+               dependencies=[Depends(require_api_key)], responses=error_responses(401, 404, 422))
 async def delete_mesh(mesh_id: str, state: Annotated[Runtime, Depends(runtime)]):
     state.delete("mesh", mesh_id)

@@ -10,6 +10,7 @@ from pydantic import ValidationError
 from raycore.camera import orthographic_rays, perspective_rays
 from raycore.render import render
 from service import codecs
+from service.auth import require_api_key
 from service.builder import build_scene, scene_id
 from service.demo import DEMO_CAMERA
 from service.errors import ClientError, LimitExceeded, UnsupportedMedia
@@ -35,8 +36,9 @@ _NPY_HITS = ("<.npy bytes: structured array, one row per ray (per hit for query=
 
 
 @router.post("", status_code=201, response_model=SceneInfo, summary="Build a scene",
+             dependencies=[Depends(require_api_key)],
              responses={200: {"model": SceneInfo, "description": "Built already"},
-                        **error_responses(413, 422)})
+                        **error_responses(401, 413, 422)})
 async def create_scene(spec: SceneSpec, response: Response, state: State):
     def build():
         key = scene_id(spec)
@@ -61,7 +63,7 @@ async def get_scene(scene_id: str, state: State):
 
 
 @router.delete("/{scene_id}", status_code=204, summary="Forget a scene",
-               responses=error_responses(404, 422))
+               dependencies=[Depends(require_api_key)], responses=error_responses(401, 404, 422))
 async def delete_scene(scene_id: str, state: State):
     state.delete("scene", scene_id)
 
