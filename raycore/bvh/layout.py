@@ -1,28 +1,29 @@
 """Flat node layout for traversal, and tree-quality statistics.
 
-Each internal node is one 64-byte row of float32 holding the boxes of *both* children and their
-references (Aila & Laine 2009's layout, as in tinybvh's ``BVH_GPU``): one cache line is fetched
-per visited node, and both children are tested before choosing which to visit first.
+The binary SAH tree is collapsed into a wide one (Wald et al. 2008, "Getting rid of packets"):
+each node holds up to eight children, whose boxes are stored plane by plane so that one vector
+instruction tests all eight (:mod:`raycore.bvh.simd`).  A wide node is one 256-byte row of
+float32 (four cache lines)::
 
-Row layout (16 × 4 bytes)::
-
-    [0:3]  left child lo    [3:6]  left child hi
-    [6:9]  right child lo   [9:12] right child hi
-    [12] left ref   [13] right ref   [14] left count   [15] right count   (int32 bit patterns)
+    [0:8] lo x   [8:16] lo y   [16:24] lo z   [24:32] hi x   [32:40] hi y   [40:48] hi z
+    [48:56] refs   [56:64] counts   (int32 bit patterns)
 
 A child with count 0 is an internal node whose row is ``ref``; a child with count > 0 is a leaf
-holding primitives ``ref .. ref + count - 1`` in leaf order.  Boxes are rounded outwards to float32,
-so a float64 scene keeps conservative boxes at half the memory.
+holding primitives ``ref .. ref + count - 1`` in leaf order; an unused slot has an empty box
+(lo = +inf, hi = -inf) that no ray enters.  Boxes are rounded outwards to float32, so a float64
+scene keeps conservative boxes at half the memory.
 """
 
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from raycore.bvh.build import BuildParams, build_binary_bvh
 
-NODE_WIDTH = 16
-LEFT_REF, RIGHT_REF, LEFT_COUNT, RIGHT_COUNT = 12, 13, 14, 15
+WIDTH = 8
+NODE_WIDTH = 8 * WIDTH
+REFS, COUNTS = 6 * WIDTH, 7 * WIDTH
 
 
 @dataclass(frozen=True)
@@ -31,15 +32,16 @@ class BVH:
 
     Attributes
     ----------
-    nodes : ndarray of float32, shape (K, 16)
-        Child-pair rows (see the module docstring); row 0 holds the root's children.
-    refs : ndarray of int32, shape (K, 16)
+    nodes : ndarray of float32, shape (K, 64)
+        Wide rows (see the module docstring); row 0 holds the root's children.
+    refs : ndarray of int32, shape (K, 64)
         The same memory viewed as int32, for the references and counts.
     order : ndarray of int64, shape (F,)
         Primitive indices in leaf order.
     lo, hi : ndarray of float64, shape (3,)
         Bounds of everything.
     depth, node_count, leaf_count : int
+        Of the binary tree the wide one was collapsed from.
     sah_cost : float
         Expected cost of a random ray hitting the root (MacDonald & Booth 1990), with the
         build's traversal and intersection costs.
@@ -74,6 +76,59 @@ def _half_areas(lo, hi):
     return extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] + extent[:, 2] * extent[:, 0]
 
 
+@njit(cache=True)
+def _collapse(left, right, areas):
+    """Group binary nodes into wide nodes of up to WIDTH children.
+
+    From each wide node's binary node, the child of largest surface area that is an internal
+    node is replaced by its two children until there are WIDTH of them (or only leaves).
+
+    Returns
+    -------
+    children : ndarray of int64, shape (K, WIDTH)
+        Binary node of each child slot, -1 where unused; row 0 is the root.
+    child_row : ndarray of int64, shape (K, WIDTH)
+        Wide row of each internal child (0 elsewhere).
+    """
+    n = len(left)
+    children = np.full((max(n, 1), WIDTH), -1, np.int64)
+    child_row = np.zeros((max(n, 1), WIDTH), np.int64)
+    source = np.empty(max(n, 1), np.int64)  # binary node of each wide row
+    source[0] = 0
+    rows = 1
+    row = 0
+    while row < rows:
+        node = source[row]
+        if left[node] < 0:
+            # a root leaf: a wide node with one child
+            children[row, 0] = node
+            row += 1
+            continue
+        children[row, 0] = left[node]
+        children[row, 1] = right[node]
+        size = 2
+        while size < WIDTH:
+            widest = -1
+            for slot in range(size):
+                child = children[row, slot]
+                if left[child] >= 0 and (widest < 0 or areas[child] > areas[children[row, widest]]):
+                    widest = slot
+            if widest < 0:
+                break
+            child = children[row, widest]
+            children[row, widest] = left[child]
+            children[row, size] = right[child]
+            size += 1
+        for slot in range(size):
+            child = children[row, slot]
+            if left[child] >= 0:
+                source[rows] = child
+                child_row[row, slot] = rows
+                rows += 1
+        row += 1
+    return children[:rows].copy(), child_row[:rows].copy()
+
+
 def build_bvh(lo, hi, params=None):
     """Build a flat BVH over primitives with bounds ``lo``, ``hi`` (float64, shape (F, 3)),
     with :class:`BuildParams` (defaults when None)."""
@@ -94,27 +149,19 @@ def build_bvh(lo, hi, params=None):
          + params.intersection_cost * (areas[is_leaf] * count[is_leaf]).sum()) / root_area
     )
 
-    if is_leaf[0]:
-        # a root leaf still needs a row: pair it with an empty box that no ray enters
-        internal = np.zeros(1, np.int64)
-        children = np.array([[0, -1]])
-    else:
-        internal = np.flatnonzero(~is_leaf)
-        children = np.stack([left[internal], right[internal]], axis=1)
-    row_of = np.full(len(node_lo), -1, np.int64)
-    row_of[internal] = np.arange(len(internal))
-
     box_lo, box_hi = round_outwards(node_lo, node_hi)
-    nodes = np.zeros((len(internal), NODE_WIDTH), np.float32)
+    children, child_row = _collapse(left, right, areas)
+    rows = len(children)
+    nodes = np.zeros((rows, NODE_WIDTH), np.float32)
     refs = nodes.view(np.int32)
-    for side, child in enumerate(children.T):
-        real = child >= 0
-        c = np.where(real, child, 0)
-        nodes[:, 6 * side:6 * side + 3] = np.where(real[:, None], box_lo[c], np.inf)
-        nodes[:, 6 * side + 3:6 * side + 6] = np.where(real[:, None], box_hi[c], -np.inf)
-        leaf = real & is_leaf[c]
-        refs[:, LEFT_REF + side] = np.where(leaf, first[c], np.where(real, row_of[c], 0))
-        refs[:, LEFT_COUNT + side] = np.where(leaf, count[c], 0)
+    real = children >= 0
+    c = np.where(real, children, 0)
+    for axis in range(3):
+        nodes[:, axis * WIDTH:(axis + 1) * WIDTH] = np.where(real, box_lo[c, axis], np.inf)
+        nodes[:, (axis + 3) * WIDTH:(axis + 4) * WIDTH] = np.where(real, box_hi[c, axis], -np.inf)
+    leaf = real & is_leaf[c]
+    refs[:, REFS:REFS + WIDTH] = np.where(leaf, first[c], np.where(real, child_row, 0))
+    refs[:, COUNTS:COUNTS + WIDTH] = np.where(leaf, count[c], 0)
     return BVH(
         nodes=nodes,
         refs=refs,

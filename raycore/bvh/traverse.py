@@ -18,7 +18,8 @@ from numba import njit
 
 from raycore._fp import gamma, like
 from raycore.bvh.build import MAX_DEPTH
-from raycore.bvh.layout import LEFT_REF
+from raycore.bvh.layout import COUNTS, REFS, WIDTH
+from raycore.bvh.simd import enter8
 from raycore.primitives.analytic import analytic_hit
 from raycore.primitives.triangle import triangle_hit, watertight_setup
 
@@ -30,13 +31,13 @@ MESH = 16
 #: Convex analytic shapes cross a ray at most twice (enter and leave).
 MAX_ANALYTIC_HITS = 2
 
-STACK_SIZE = MAX_DEPTH + 2
+#: A wide node pushes at most WIDTH - 1 children, at most once per level.
+STACK_SIZE = (WIDTH - 1) * MAX_DEPTH + 2
 
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _ray_setup(ox, dx, dy, dz):
-    """Reciprocal direction for near planes and padded for far planes, and the near-plane
-    offsets (0: lo, 3: hi).
+    """Reciprocal direction for near planes, and padded for far planes.
 
     The far distance is padded by 1 + 2γ(5): the γ(3) of Ize's analysis for the reciprocal, the
     subtraction and the product, plus two roundings for folding the pad into the reciprocal.
@@ -45,77 +46,49 @@ def _ray_setup(ox, dx, dy, dz):
     iy = like(ox, 1) / dy
     iz = like(ox, 1) / dz
     pad = like(ox, 1) + like(ox, 2) * gamma(5, ox)
-    return (ix, iy, iz, ix * pad, iy * pad, iz * pad,
-            0 if ix >= 0 else 3, 0 if iy >= 0 else 3, 0 if iz >= 0 else 3)
+    return ix, iy, iz, ix * pad, iy * pad, iz * pad
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _enter(nodes, row, base, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, tmin, tmax):
-    """Entry distance of the ray into child box ``base`` (0 or 6) of node ``row``; inf on a miss.
+def _descend(nodes, refs, row, row_base, ox, oy, oz, ix, iy, iz, fx, fy, fz, tmin, tmax, stack,
+             stack_t, top, entry, leaf_first, leaf_count):
+    """Test the ray against the children of wide node ``row``.
 
-    Written so that a NaN slab distance (0·inf) leaves the interval unchanged.
-    """
-    t_near = tmin
-    t_far = tmax
-    t = (nodes[row, base + nx] - ox) * ix
-    if t > t_near:
-        t_near = t
-    t = (nodes[row, base + 3 - nx] - ox) * fx
-    if t < t_far:
-        t_far = t
-    t = (nodes[row, base + 1 + ny] - oy) * iy
-    if t > t_near:
-        t_near = t
-    t = (nodes[row, base + 4 - ny] - oy) * fy
-    if t < t_far:
-        t_far = t
-    t = (nodes[row, base + 2 + nz] - oz) * iz
-    if t > t_near:
-        t_near = t
-    t = (nodes[row, base + 5 - nz] - oz) * fz
-    if t < t_far:
-        t_far = t
-    if t_near <= t_far:
-        return t_near
-    return like(ox, np.inf)
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _descend(nodes, refs, row, row_base, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, tmin,
-             tmax, stack, stack_t, top):
-    """Test both children of ``row``: return the nearer internal child to visit next (-1 if
-    none), pushing the farther one, and the children that are leaves, nearest first.
-
-    A leaf's count is returned for an entered leaf only; internal children have count 0, so
-    ``(first, count)`` pairs can be looped over directly.
+    Entered internal children go on the stack sorted so that the nearest is popped first, and
+    the nearest of them is returned as the next row (-1 if none); entered leaves are listed in
+    ``leaf_first`` / ``leaf_count``.
 
     Returns
     -------
-    next_row, top, first0, count0, first1, count1
-        Leaf ranges have count 0 where absent.
+    next_row, top, leaves
     """
-    t_left = _enter(nodes, row, 0, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, tmin, tmax)
-    t_right = _enter(nodes, row, 6, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, tmin, tmax)
-    # Which child is nearer is a coin toss for the branch predictor: order them with selects
-    # and push with a conditional increment instead of branching.
-    swap = t_right < t_left
-    near_side = LEFT_REF + np.int64(swap)
-    far_side = LEFT_REF + 1 - np.int64(swap)
-    t_near = t_right if swap else t_left
-    t_far = t_left if swap else t_right
-    near_ref = refs[row, near_side]
-    near_count = refs[row, near_side + 2]
-    far_ref = refs[row, far_side]
-    far_count = refs[row, far_side + 2]
-    # the far child is entered only if the near one is (t_near <= t_far)
-    near_hit = t_near != np.inf
-    far_hit = t_far != np.inf
-    stack[top] = row_base + far_ref
-    stack_t[top] = t_far
-    top += np.int64(far_hit and far_count == 0)
-    next_row = row_base + near_ref if near_hit and near_count == 0 else -1
-    return (next_row, top, near_ref, near_count if near_hit else 0, far_ref,
-            far_count if far_hit else 0)
+    mask = enter8(nodes, row, ox, oy, oz, ix, iy, iz, fx, fy, fz, tmin, tmax, entry)
+    leaves = 0
+    base = top
+    for j in range(WIDTH):
+        if not (mask >> j) & 1:
+            continue
+        ref = refs[row, REFS + j]
+        count = refs[row, COUNTS + j]
+        if count > 0:
+            leaf_first[leaves] = ref
+            leaf_count[leaves] = count
+            leaves += 1
+            continue
+        # insertion into this node's run of the stack, farthest first
+        t = entry[j]
+        k = top
+        while k > base and stack_t[k - 1] < t:
+            stack[k] = stack[k - 1]
+            stack_t[k] = stack_t[k - 1]
+            k -= 1
+        stack[k] = row_base + ref
+        stack_t[k] = t
+        top += 1
+    if top > base:
+        top -= 1
+        return stack[top], top, leaves
+    return -1, top, leaves
 
 
 @njit(cache=True, inline="always")
@@ -141,14 +114,15 @@ def _record(hits_t, hits_obj, hits_prim, begin, end, found, t, obj, prim):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _trace_mesh(mode, ox, oy, oz, dx, dy, dz, tmin, tmax, test, nodes, refs, tri_verts, root,
-                tri0, stack, stack_t, obj, hits_t, hits_obj, hits_prim, begin, end, found):
+                tri0, stack, stack_t, entry, leaf_first, leaf_count, obj, hits_t, hits_obj,
+                hits_prim, begin, end, found):
     """Traverse one mesh's BVH (rows from ``root``, triangles from ``tri0``) with an
-    object-space ray.
+    object-space ray; ``entry``, ``leaf_first``, ``leaf_count`` are (WIDTH,) scratch arrays.
 
     Returns ``(t, prim, u, v, found)``: the closest hit below ``tmax`` (``prim`` is -1 if none;
     in ANY mode the first found) and, in ALL mode, the running hit count.
     """
-    ix, iy, iz, fx, fy, fz, nx, ny, nz = _ray_setup(ox, dx, dy, dz)
+    ix, iy, iz, fx, fy, fz = _ray_setup(ox, dx, dy, dz)
     kx, ky, kz, sx, sy, sz = watertight_setup(dx, dy, dz)
     best_t = tmax
     best_prim = -1
@@ -156,12 +130,12 @@ def _trace_mesh(mode, ox, oy, oz, dx, dy, dz, tmin, tmax, test, nodes, refs, tri
     top = 0
     row = root
     while row >= 0:
-        next_row, top, first0, count0, first1, count1 = _descend(
-            nodes, refs, row, root, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, tmin, best_t,
-            stack, stack_t, top)
-        for leaf in range(2):
-            first = tri0 + (first0 if leaf == 0 else first1)
-            for p in range(first, first + (count0 if leaf == 0 else count1)):
+        next_row, top, leaves = _descend(nodes, refs, row, root, ox, oy, oz, ix, iy, iz, fx, fy,
+                                         fz, tmin, best_t, stack, stack_t, top, entry,
+                                         leaf_first, leaf_count)
+        for leaf in range(leaves):
+            first = tri0 + leaf_first[leaf]
+            for p in range(first, first + leaf_count[leaf]):
                 t, u, w = triangle_hit(test, ox, oy, oz, dx, dy, dz, kx, ky, kz, sx, sy, sz,
                                        tmin, best_t, tri_verts[p, 0], tri_verts[p, 1],
                                        tri_verts[p, 2], tri_verts[p, 3], tri_verts[p, 4],
@@ -228,13 +202,18 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
     stack_t = np.empty(STACK_SIZE, origins.dtype)
     mesh_stack = np.empty(STACK_SIZE, np.int64)
     mesh_stack_t = np.empty(STACK_SIZE, origins.dtype)
+    entry = np.empty(WIDTH, origins.dtype)
+    leaf_first = np.empty(WIDTH, np.int64)
+    leaf_count = np.empty(WIDTH, np.int64)
+    mesh_leaf_first = np.empty(WIDTH, np.int64)
+    mesh_leaf_count = np.empty(WIDTH, np.int64)
     has_top = len(top_nodes) > 0
     store = len(hits_t) > 0
     for i in range(start, stop):
         ox, oy, oz = origins[i, 0], origins[i, 1], origins[i, 2]
         dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
         t_lo = tmin[i]
-        ix, iy, iz, fx, fy, fz, nx, ny, nz = _ray_setup(ox, dx, dy, dz)
+        ix, iy, iz, fx, fy, fz = _ray_setup(ox, dx, dy, dz)
         begin = offsets[i] if store else 0
         end = offsets[i + 1] if store else 0
 
@@ -247,13 +226,15 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
         # The unbounded objects (planes) live outside the top-level BVH; they are processed
         # first, as a leaf of their own, so that they can shorten the ray before traversal.
         in_top = False
-        first0, count0, first1, count1 = 0, len(unbounded), 0, 0
+        leaf_first[0] = 0
+        leaf_count[0] = len(unbounded)
+        leaves = 1
         next_row = 0 if has_top else -1
         top = 0
         while True:
-            for leaf in range(2):
-                first = first0 if leaf == 0 else first1
-                for slot in range(first, first + (count0 if leaf == 0 else count1)):
+            for leaf in range(leaves):
+                first = leaf_first[leaf]
+                for slot in range(first, first + leaf_count[leaf]):
                     if done:
                         break
                     obj = top_order[slot] if in_top else unbounded[slot]
@@ -269,7 +250,8 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
                         t, p, u, v, found = _trace_mesh(
                             mode, mox, moy, moz, mdx, mdy, mdz, t_lo, best_t, test, mesh_nodes,
                             mesh_refs, tri_verts, node_base[m], tri_base[m], mesh_stack,
-                            mesh_stack_t, obj, hits_t, hits_obj, hits_prim, begin, end, found)
+                            mesh_stack_t, entry, mesh_leaf_first, mesh_leaf_count, obj, hits_t,
+                            hits_obj, hits_prim, begin, end, found)
                         if p >= 0:
                             best_t, best_obj, best_prim, best_u, best_v = t, obj, p, u, v
                             done = mode == ANY
@@ -298,9 +280,9 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
                 row, top = _pop(stack, stack_t, top, best_t)
                 if row < 0:
                     break
-            next_row, top, first0, count0, first1, count1 = _descend(
-                top_nodes, top_refs, row, 0, ox, oy, oz, ix, iy, iz, fx, fy, fz, nx, ny, nz, t_lo,
-                best_t, stack, stack_t, top)
+            next_row, top, leaves = _descend(top_nodes, top_refs, row, 0, ox, oy, oz, ix, iy, iz,
+                                             fx, fy, fz, t_lo, best_t, stack, stack_t, top,
+                                             entry, leaf_first, leaf_count)
         if mode == ALL:
             out_obj[i] = found
             continue

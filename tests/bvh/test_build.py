@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from raycore.bvh.build import MAX_DEPTH, BuildParams
-from raycore.bvh.layout import LEFT_COUNT, LEFT_REF, build_bvh
+from raycore.bvh.build import MAX_DEPTH, BuildParams, build_binary_bvh
+from raycore.bvh.layout import COUNTS, REFS, WIDTH, build_bvh
 
 
 def random_boxes(count, seed=0):
@@ -22,14 +22,14 @@ def walk(bvh, internal=None):
     stack = [(0, np.full(3, -np.inf), np.full(3, np.inf))]
     while stack:
         row, outer_lo, outer_hi = stack.pop()
-        for side in range(2):
-            lo = bvh.nodes[row, 6 * side:6 * side + 3]
-            hi = bvh.nodes[row, 6 * side + 3:6 * side + 6]
+        for slot in range(WIDTH):
+            lo = bvh.nodes[row, slot:3 * WIDTH:WIDTH]
+            hi = bvh.nodes[row, 3 * WIDTH + slot:6 * WIDTH:WIDTH]
             if np.any(lo > hi):
-                continue  # the empty partner of a root leaf
+                continue  # an unused slot
             assert np.all(lo >= outer_lo) and np.all(hi <= outer_hi), "child box leaks out"
-            ref = bvh.refs[row, LEFT_REF + side]
-            count = bvh.refs[row, LEFT_COUNT + side]
+            ref = bvh.refs[row, REFS + slot]
+            count = bvh.refs[row, COUNTS + slot]
             if count:
                 yield lo, hi, ref, count
             else:
@@ -65,22 +65,29 @@ def test_reported_quality_matches_the_tree():
     lo, hi = random_boxes(5000, seed=3)
     params = BuildParams(traversal_cost=1.5, intersection_cost=1.0)
     bvh = build_bvh(lo, hi, params)
-    internal = []
-    leaves = list(walk(bvh, internal))
+    leaves = list(walk(bvh))
     assert bvh.leaf_count == len(leaves)
-    assert bvh.node_count == 2 * bvh.leaf_count - 1 == 2 * len(internal) + 3
     assert 0 < bvh.depth <= MAX_DEPTH
 
-    def half_area(lo, hi):
-        e = hi.astype(np.float64) - lo
-        return e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
-
-    # MacDonald–Booth cost from the stored (float32) boxes: the root plus the internal children
-    root = half_area(bvh.lo, bvh.hi)
-    traversal = root + sum(half_area(a, b) for a, b in internal)
-    intersection = sum(half_area(a, b) * size for a, b, _, size in leaves)
-    expected = (params.traversal_cost * traversal + params.intersection_cost * intersection) / root
-    assert bvh.sah_cost == pytest.approx(expected, rel=1e-5)
+    # MacDonald–Booth cost of the binary tree the wide one was collapsed from, recomputed
+    order, node_lo, node_hi, left, _, first, count, depth = build_binary_bvh(
+        lo, hi, params.bins, params.max_leaf_size, params.traversal_cost,
+        params.intersection_cost)
+    extent = node_hi - node_lo
+    area = extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] + extent[:, 2] * extent[:, 0]
+    leaf = count > 0
+    expected = (params.traversal_cost * area[~leaf].sum()
+                + params.intersection_cost * (area[leaf] * count[leaf]).sum()) / area[0]
+    assert bvh.sah_cost == pytest.approx(expected, rel=1e-12)
+    assert bvh.node_count == len(node_lo) == 2 * bvh.leaf_count - 1 and bvh.depth == depth
+    # collapsing keeps the binary tree's leaves, and fills a wide node unless only leaves are
+    # left to open
+    assert sorted((int(f), int(c)) for *_, f, c in leaves) == sorted(
+        zip(first[leaf].tolist(), count[leaf].tolist(), strict=True))
+    used = np.isfinite(bvh.nodes[:, 0:WIDTH])
+    assert used.sum(axis=1).min() >= 2
+    partial = used.sum(axis=1) < WIDTH
+    assert np.all(bvh.refs[partial, COUNTS:COUNTS + WIDTH][used[partial]] > 0)
 
 
 def test_sah_prefers_fewer_tests_when_intersections_are_expensive():
