@@ -73,3 +73,14 @@ def enter8(typingctx, nodes, row, ox, oy, oz, ix, iy, iz, fx, fy, fz, tmin, tmax
         return builder.zext(builder.bitcast(hit, ir.IntType(WIDTH)), ir.IntType(64))
 
     return sig, codegen
+
+
+@intrinsic
+def lowest_set_bit(typingctx, mask):
+    """Index of the lowest set bit of a non-zero int64 (one instruction: tzcnt)."""
+    sig = types.int64(types.int64)
+
+    def codegen(context, builder, signature, args):
+        return builder.cttz(args[0], ir.Constant(ir.IntType(1), 1))
+
+    return sig, codegen

@@ -19,7 +19,7 @@ from numba import njit
 from raycore._fp import gamma, like
 from raycore.bvh.build import MAX_DEPTH
 from raycore.bvh.layout import COUNTS, REFS, WIDTH
-from raycore.bvh.simd import enter8
+from raycore.bvh.simd import enter8, lowest_set_bit
 from raycore.primitives.analytic import analytic_hit
 from raycore.primitives.triangle import triangle_hit, watertight_setup
 
@@ -65,9 +65,10 @@ def _descend(nodes, refs, row, row_base, ox, oy, oz, ix, iy, iz, fx, fy, fz, tmi
     mask = enter8(nodes, row, ox, oy, oz, ix, iy, iz, fx, fy, fz, tmin, tmax, entry)
     leaves = 0
     base = top
-    for j in range(WIDTH):
-        if not (mask >> j) & 1:
-            continue
+    while mask:
+        # visit the entered children only, without a branch per slot
+        j = lowest_set_bit(mask)
+        mask &= mask - 1
         ref = refs[row, REFS + j]
         count = refs[row, COUNTS + j]
         if count > 0:
