@@ -24,10 +24,12 @@ async def require_api_key(
     expected = runtime(request).settings.api_key
     if expected is None:
         return
-    given = key if key is not None else (bearer.credentials if bearer is not None else None)
-    if given is None:
+    given = [value for value in (key, bearer.credentials if bearer is not None else None)
+             if value is not None]
+    if not given:
         raise HTTPException(401, "this endpoint needs the API key: send it as X-API-Key or "
                                  "Authorization: Bearer", headers={"WWW-Authenticate": "Bearer"})
-    # constant time: the comparison must not tell how much of a guess was right
-    if not hmac.compare_digest(given.encode(), expected.encode()):
+    # every key sent must be right (a wrong one beside a right one is still refused), compared
+    # in constant time: the comparison must not tell how much of a guess was right
+    if not all([hmac.compare_digest(value.encode(), expected.encode()) for value in given]):
         raise HTTPException(401, "the API key is wrong", headers={"WWW-Authenticate": "Bearer"})

@@ -32,7 +32,8 @@ def mutations(client, headers):
 @pytest.mark.parametrize("headers", [
     {}, {"x-api-key": "wrong"}, {"authorization": "Bearer wrong"}, {"authorization": KEY},
     {"authorization": f"Basic {KEY}"}, {"x-api-key": ""}, {"x-api-key": KEY + "x"},
-    {"x-api-key": KEY[:-1]},
+    {"x-api-key": KEY[:-1]}, {"x-api-key": KEY, "authorization": "Bearer wrong"},
+    {"x-api-key": "wrong", "authorization": f"Bearer {KEY}"},
 ])
 def test_mutations_without_the_key_are_401(guarded, headers):
     for response in mutations(guarded, headers):
