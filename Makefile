@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 HOST   ?= 127.0.0.1
 PORT   ?= 8000
 
-.PHONY: run test bench chart openapi lint clean image-test
+.PHONY: run test fuzz bench chart openapi lint clean image-test
 
 # One stamp per set of extras, so that `make test` does not pull in the benchmark stack.
 $(BIN)/python:
@@ -27,6 +27,12 @@ run: $(VENV)/.dev-installed
 
 test: $(VENV)/.dev-installed
 	$(BIN)/python -m pytest
+
+# Schemathesis against every operation, longer than the bounded run inside `make test`.
+FUZZ_EXAMPLES ?= 500
+fuzz: $(VENV)/.dev-installed
+	RAYCORE_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(BIN)/python -m pytest -p no:cacheprovider \
+	    tests/service/test_schemathesis.py tests/service/test_fuzz.py tests/service/test_hostile.py
 
 bench: $(VENV)/.bench-installed
 	$(BIN)/python -m benchmarks.run

@@ -51,7 +51,7 @@ def _file_type(given, media_type, filename=None):
 @router.post("", status_code=201, response_model=MeshInfo, summary="Upload a mesh file",
              openapi_extra={"requestBody": _UPLOAD_BODY}, dependencies=[Depends(require_api_key)],
              responses={200: {"model": MeshInfo, "description": "The same mesh was stored already"},
-                        **error_responses(401, 413, 415, 422)})
+                        **error_responses(400, 401, 413, 415, 422)})
 async def upload_mesh(request: Request, response: Response,
                       state: Annotated[Runtime, Depends(runtime)],
                       file_format: Annotated[str | None, Query(alias="format",

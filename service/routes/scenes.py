@@ -38,7 +38,7 @@ _NPY_HITS = ("<.npy bytes: structured array, one row per ray (per hit for query=
 @router.post("", status_code=201, response_model=SceneInfo, summary="Build a scene",
              dependencies=[Depends(require_api_key)],
              responses={200: {"model": SceneInfo, "description": "Built already"},
-                        **error_responses(401, 413, 422)})
+                        **error_responses(400, 401, 413, 422)})
 async def create_scene(spec: SceneSpec, response: Response, state: State):
     def build():
         key = scene_id(spec)
@@ -149,7 +149,7 @@ def run_query(scene, rays, options):
                  "value": {"camera": DEMO_CAMERA, "shading": "lambert"}}}}}}},
     responses={200: {"description": "The image", "content": {
         "image/png": {"schema": _BINARY, "example": "<PNG bytes>"}}},
-        **error_responses(404, 413, 422)})
+        **error_responses(400, 404, 413, 422)})
 async def render_scene(scene_id: str, spec: RenderRequest, state: State):
     entry = state.get("scene", scene_id)
     camera = spec.camera
