@@ -312,3 +312,29 @@ def error_responses(*statuses):
     return {status: {"model": Error, "description": _ERROR_EXAMPLES[status][0],
                      "content": {"application/json": {"example": _ERROR_EXAMPLES[status][1]}}}
             for status in statuses}
+
+
+# ---------------------------------------------------------------------- links
+
+#: OpenAPI links from what creates a mesh or scene to the operations that use its id (clients
+#: and stateful fuzzers follow them).
+MESH_LINKS = {
+    "GetMesh": {"operationId": "get_mesh_v1_meshes__mesh_id__get",
+                "parameters": {"mesh_id": "$response.body#/id"},
+                "description": "Describe the mesh"},
+    "DeleteMesh": {"operationId": "delete_mesh_v1_meshes__mesh_id__delete",
+                   "parameters": {"mesh_id": "$response.body#/id"},
+                   "description": "Forget the mesh"},
+    "BuildSceneWithMesh": {"operationId": "create_scene_v1_scenes_post",
+                           "requestBody": {"objects": [{"type": "mesh",
+                                                        "mesh": "$response.body#/id"}]},
+                           "description": "Build a scene of the mesh"},
+}
+SCENE_LINKS = {
+    name: {"operationId": operation, "parameters": {"scene_id": "$response.body#/id"},
+           "description": description}
+    for name, operation, description in [
+        ("GetScene", "get_scene_v1_scenes__scene_id__get", "Describe the scene"),
+        ("DeleteScene", "delete_scene_v1_scenes__scene_id__delete", "Forget the scene"),
+        ("Intersect", "intersect_v1_scenes__scene_id__intersect_post", "Cast rays at the scene"),
+        ("Render", "render_scene_v1_scenes__scene_id__render_post", "Render the scene")]}

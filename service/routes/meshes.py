@@ -9,7 +9,7 @@ from service.auth import require_api_key
 from service.builder import MESH_FORMATS, parse_mesh
 from service.errors import ClientError, UnsupportedMedia
 from service.runtime import Runtime, runtime
-from service.schemas import MeshInfo, error_responses
+from service.schemas import MESH_LINKS, MeshInfo, error_responses
 
 router = APIRouter(prefix="/v1/meshes", tags=["meshes"])
 
@@ -50,7 +50,9 @@ def _file_type(given, media_type, filename=None):
 
 @router.post("", status_code=201, response_model=MeshInfo, summary="Upload a mesh file",
              openapi_extra={"requestBody": _UPLOAD_BODY}, dependencies=[Depends(require_api_key)],
-             responses={200: {"model": MeshInfo, "description": "The same mesh was stored already"},
+             responses={201: {"links": MESH_LINKS},
+                        200: {"model": MeshInfo, "description": "The same mesh was stored already",
+                              "links": MESH_LINKS},
                         **error_responses(400, 401, 413, 415, 422)})
 async def upload_mesh(request: Request, response: Response,
                       state: Annotated[Runtime, Depends(runtime)],

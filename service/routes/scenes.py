@@ -16,6 +16,7 @@ from service.demo import DEMO_CAMERA
 from service.errors import ClientError, LimitExceeded, UnsupportedMedia
 from service.runtime import Runtime, runtime
 from service.schemas import (
+    SCENE_LINKS,
     IntersectRequest,
     IntersectResponse,
     NpyOptions,
@@ -37,7 +38,9 @@ _NPY_HITS = ("<.npy bytes: structured array, one row per ray (per hit for query=
 
 @router.post("", status_code=201, response_model=SceneInfo, summary="Build a scene",
              dependencies=[Depends(require_api_key)],
-             responses={200: {"model": SceneInfo, "description": "Built already"},
+             responses={201: {"links": SCENE_LINKS},
+                        200: {"model": SceneInfo, "description": "Built already",
+                              "links": SCENE_LINKS},
                         **error_responses(400, 401, 413, 422)})
 async def create_scene(spec: SceneSpec, response: Response, state: State):
     def build():

@@ -87,3 +87,20 @@ def test_operation(scene, case):
     if case.operation.security or case.method in ("POST", "DELETE"):
         case.headers = {**(case.headers or {}), "X-API-Key": KEY}
     case.call_and_validate(session=client, checks=CHECKS)
+
+
+class Workflows(schema.as_state_machine()):
+    """Sequences that follow the documented links: upload a mesh, build scenes of it, describe,
+    query, render and delete them, each answer checked as above."""
+
+    def get_call_kwargs(self, case):
+        return {"headers": {"X-API-Key": KEY}}
+
+    def validate_response(self, response, case, additional_checks=None, **kwargs):
+        case.validate_response(response, checks=CHECKS)
+
+
+TestWorkflows = Workflows.TestCase
+TestWorkflows.settings = settings(max_examples=max(EXAMPLES // 5, 3), stateful_step_count=6,
+                                  deadline=None, derandomize=True,
+                                  suppress_health_check=list(HealthCheck))
