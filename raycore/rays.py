@@ -21,8 +21,8 @@ def resolve_dtype(dtype):
     return resolved
 
 
-def as_float_array(value, name, dtype, shape=None):
-    """Convert ``value`` to a C-contiguous finite array of ``dtype``.
+def as_real_array(value, name, dtype, shape=None):
+    """Convert ``value`` to a C-contiguous array of ``dtype`` (no copy when it already is one).
 
     Parameters
     ----------
@@ -37,7 +37,7 @@ def as_float_array(value, name, dtype, shape=None):
     Raises
     ------
     ValueError
-        On a non-numeric value, a shape mismatch, or NaN/inf entries.
+        On a non-numeric value or a shape mismatch.
     """
     try:
         array = np.asarray(value)
@@ -51,7 +51,14 @@ def as_float_array(value, name, dtype, shape=None):
     ):
         expected = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
         raise ValueError(f"{name} must have shape {expected}, got {array.shape}")
-    array = np.ascontiguousarray(array, dtype=dtype)
+    # values beyond float32's range become inf here; callers refuse them as non-finite
+    with np.errstate(over="ignore"):
+        return np.ascontiguousarray(array, dtype=dtype)
+
+
+def as_float_array(value, name, dtype, shape=None):
+    """:func:`as_real_array`, and refuse NaN and inf entries (``ValueError`` naming ``name``)."""
+    array = as_real_array(value, name, dtype, shape)
     if not np.all(np.isfinite(array)):
         raise ValueError(f"{name} must be finite (no NaN or inf)")
     return array
@@ -100,22 +107,6 @@ def _ray_status(origins, directions):
     return status
 
 
-def _as_ray_array(value, name, dtype, count=None):
-    """An (N, 3) C-contiguous array of ``dtype`` (no copy when it already is one)."""
-    try:
-        array = np.asarray(value)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"{name} must be an array of real numbers: {error}") from error
-    if array.dtype.kind not in "biuf":
-        raise ValueError(f"{name} must hold real numbers, got dtype {array.dtype}")
-    if array.ndim != 2 or array.shape[1] != 3 or (count is not None and len(array) != count):
-        expected = f"({'N' if count is None else count}, 3)"
-        raise ValueError(f"{name} must have shape {expected}, got {array.shape}")
-    # values beyond float32's range become inf here, and are refused as non-finite after
-    with np.errstate(over="ignore"):
-        return np.ascontiguousarray(array, dtype=dtype)
-
-
 def prepare_rays(origins, directions, tmin=0.0, tmax=np.inf, dtype=np.float64):
     """Validate a ray batch and return contiguous arrays in one precision.
 
@@ -139,8 +130,9 @@ def prepare_rays(origins, directions, tmin=0.0, tmax=np.inf, dtype=np.float64):
         Naming ``origins``, ``directions``, ``tmin`` or ``tmax``: wrong shape or dtype, NaN or inf
         coordinates, zero-length directions, NaN bounds.
     """
-    origins = _as_ray_array(origins, "origins", dtype)
-    directions = _as_ray_array(directions, "directions", dtype, len(origins))
+    # finiteness is checked with the zero directions, in one compiled pass
+    origins = as_real_array(origins, "origins", dtype, (None, 3))
+    directions = as_real_array(directions, "directions", dtype, (len(origins), 3))
     status = _ray_status(origins, directions)
     if status.any():
         bad = np.flatnonzero(status)
