@@ -46,7 +46,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app = FastAPI(title="raycore", version=version("raycore"), description=DESCRIPTION,
                   lifespan=_lifespan)
     app.state.runtime = Runtime(settings, Store(settings.store_bytes))
-    app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes)
+    app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes,
+                       seconds=settings.body_seconds)
     app.add_middleware(ServerTiming)
     app.add_exception_handler(ClientError, _client_error)
     app.add_exception_handler(RequestValidationError, _invalid_request)
@@ -93,11 +94,13 @@ class ServerTiming:
 
 
 class BodyLimit:
-    """ASGI middleware: 413 for bodies over ``max_bytes``, by Content-Length or as they stream."""
+    """ASGI middleware: 413 for bodies over ``max_bytes``, by Content-Length or as they stream;
+    408 when the body has not all arrived ``seconds`` after the request did."""
 
-    def __init__(self, app, max_bytes):
+    def __init__(self, app, max_bytes, seconds=None):
         self.app = app
         self.max_bytes = max_bytes
+        self.seconds = seconds
 
     async def __call__(self, scope, receive, send):
         if scope["type"] != "http":
@@ -109,10 +112,21 @@ class BodyLimit:
             await JSONResponse({"detail": detail}, status_code=413)(scope, receive, send)
             return
         received = 0
+        deadline = None if self.seconds is None else time.monotonic() + self.seconds
 
         async def limited_receive():
-            nonlocal received
-            message = await receive()
+            nonlocal received, deadline
+            if deadline is None:  # the body is all here: later calls wait for a disconnect
+                message = await receive()
+            else:
+                try:
+                    with anyio.fail_after(max(deadline - time.monotonic(), 0)):
+                        message = await receive()
+                except TimeoutError:
+                    raise HTTPException(408, f"the body did not all arrive within {self.seconds}"
+                                             " s, the limit") from None
+                if not message.get("more_body", False):
+                    deadline = None
             received += len(message.get("body", b""))
             if received > self.max_bytes:
                 # answered by the app's HTTPException handler, whoever is reading the body

@@ -31,6 +31,9 @@ class Settings:
         Requests that run geometry work at once.  Each query already uses every core, so more
         slots mostly add memory; and more than one is only safe when Numba's threading layer
         is thread-safe (omp or tbb: the workqueue layer aborts on concurrent parallel kernels).
+    body_seconds : int
+        Seconds a client has, from its request's arrival, to send the whole body (408 after):
+        a slow or stalled upload must not hold a connection and its buffers for ever.
     demo : bool
         Build the demo scene (id ``demo``) at startup.
     api_key : str or None
@@ -44,6 +47,7 @@ class Settings:
     max_render_pixels: int = 4096 * 4096
     store_bytes: int = 2048 * MIB
     compute_slots: int = 1
+    body_seconds: int = 60
     demo: bool = True
     api_key: str | None = dataclasses.field(default=None, repr=False)
 

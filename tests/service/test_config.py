@@ -18,3 +18,9 @@ def test_defaults_and_overrides():
 def test_bad_values_name_the_variable(name, value):
     with pytest.raises(ValueError, match=name):
         load_settings({name: value})
+
+
+def test_body_deadline_from_the_environment():
+    assert load_settings({"RAYCORE_BODY_SECONDS": "5"}).body_seconds == 5
+    with pytest.raises(ValueError, match="RAYCORE_BODY_SECONDS"):
+        load_settings({"RAYCORE_BODY_SECONDS": "0"})

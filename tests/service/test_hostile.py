@@ -3,9 +3,12 @@ and the service still answers a normal request afterwards.  Nothing it was not g
 
 import io
 import json
+import socket
 import struct
 import sys
+import time
 
+import httpx
 import numpy as np
 import pytest
 import trimesh
@@ -13,6 +16,7 @@ from fastapi.testclient import TestClient
 
 from service.app import create_app
 from service.config import Settings
+from service.process import running_service
 
 from .data import SETTINGS, SPEC, sphere_file
 
@@ -397,3 +401,31 @@ def test_over_the_store_budget():
         assert client.app.state.runtime.store.nbytes <= settings.store_bytes
         assert client.get(f"/v1/scenes/{ids[-1]}").status_code == 200
         assert client.get(f"/v1/scenes/{ids[0]}").status_code == 404
+
+
+# ---------------------------------------------------------------------- a real server
+
+
+def test_stalled_uploads_time_out_on_a_real_server():
+    """Against uvicorn: a client that stops sending its body mid-way gets a 408 once the body
+    deadline passes, and others are served meanwhile and afterwards."""
+    with running_service({"RAYCORE_BODY_SECONDS": "1", "RAYCORE_DEMO": "false"}) as url:
+        port = int(url.rsplit(":", 1)[1])
+        with socket.create_connection(("127.0.0.1", port), timeout=30) as stalled:
+            stalled.sendall(b"POST /v1/scenes HTTP/1.1\r\nhost: x\r\ncontent-type: "
+                            b"application/json\r\ncontent-length: 1000\r\n\r\n{\"objects\": [")
+            served = httpx.post(f"{url}/v1/scenes", json=SPEC, timeout=30)
+            assert served.status_code == 201, served.text
+            start = time.monotonic()
+            answer = b""
+            while b"\r\n\r\n" not in answer or not answer.rstrip().endswith(b"}"):
+                chunk = stalled.recv(4096)
+                if not chunk:
+                    break
+                answer += chunk
+            assert time.monotonic() - start < 10
+        head, _, body = answer.partition(b"\r\n\r\n")
+        assert head.startswith(b"HTTP/1.1 408"), answer
+        assert "did not all arrive" in json.loads(body)["detail"]
+        scene = httpx.post(f"{url}/v1/scenes/{served.json()['id']}/intersect", json=RAY)
+        assert scene.status_code == 200 and scene.json()["geom_id"] == [0]
