@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 HOST   ?= 127.0.0.1
 PORT   ?= 8000
 
-.PHONY: run test fuzz bench chart openapi lint clean image-test
+.PHONY: run test fuzz load bench chart openapi lint clean image-test
 
 # One stamp per set of extras, so that `make test` does not pull in the benchmark stack.
 $(BIN)/python:
@@ -33,6 +33,11 @@ FUZZ_EXAMPLES ?= 500
 fuzz: $(VENV)/.dev-installed
 	RAYCORE_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(BIN)/python -m pytest -p no:cacheprovider \
 	    tests/service/test_schemathesis.py tests/service/test_fuzz.py tests/service/test_hostile.py
+
+# Concurrent clients against a real uvicorn for 60 s (benchmarks/service_load.py): throughput,
+# p50/p99 latency; fails on any error or when resident memory passes the store budget + margin.
+load: $(VENV)/.dev-installed
+	$(BIN)/python -m benchmarks.service_load --seconds 60
 
 bench: $(VENV)/.bench-installed
 	$(BIN)/python -m benchmarks.run
