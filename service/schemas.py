@@ -296,6 +296,8 @@ _ERROR_EXAMPLES = {
                      "Authorization: Bearer"}),
     404: ("No such scene or mesh",
           {"detail": f"no scene '{EXAMPLE_SCENE_ID}' (it may have been evicted: send it again)"}),
+    408: ("The body did not all arrive in time (RAYCORE_BODY_SECONDS)",
+          {"detail": "the body did not all arrive within 60 s, the limit"}),
     413: ("Over a configured limit",
           {"detail": "2500000 rays in one request; the limit is 2097152"}),
     415: ("Unreadable content type",

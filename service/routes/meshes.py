@@ -53,7 +53,7 @@ def _file_type(given, media_type, filename=None):
              responses={201: {"links": MESH_LINKS},
                         200: {"model": MeshInfo, "description": "The same mesh was stored already",
                               "links": MESH_LINKS},
-                        **error_responses(400, 401, 413, 415, 422)})
+                        **error_responses(400, 401, 408, 413, 415, 422)})
 async def upload_mesh(request: Request, response: Response,
                       state: Annotated[Runtime, Depends(runtime)],
                       file_format: Annotated[str | None, Query(alias="format",

@@ -41,7 +41,7 @@ _NPY_HITS = ("<.npy bytes: structured array, one row per ray (per hit for query=
              responses={201: {"links": SCENE_LINKS},
                         200: {"model": SceneInfo, "description": "Built already",
                               "links": SCENE_LINKS},
-                        **error_responses(400, 401, 413, 422)})
+                        **error_responses(400, 401, 408, 413, 422)})
 async def create_scene(spec: SceneSpec, response: Response, state: State):
     def build():
         key = scene_id(spec)
@@ -83,7 +83,7 @@ async def delete_scene(scene_id: str, state: State):
             codecs.NPY: {"schema": _BINARY, "example": _NPY_RAYS}}},
         "responses": {"200": {"content": {codecs.NPY: {"schema": _BINARY,
                                                        "example": _NPY_HITS}}}}},
-    responses=error_responses(400, 404, 413, 415, 422))
+    responses=error_responses(400, 404, 408, 413, 415, 422))
 async def intersect(scene_id: str, request: Request, state: State,
                     options: Annotated[NpyOptions, Query()]):
     entry = state.get("scene", scene_id)
@@ -152,7 +152,7 @@ def run_query(scene, rays, options):
                  "value": {"camera": DEMO_CAMERA, "shading": "lambert"}}}}}}},
     responses={200: {"description": "The image", "content": {
         "image/png": {"schema": _BINARY, "example": "<PNG bytes>"}}},
-        **error_responses(400, 404, 413, 422)})
+        **error_responses(400, 404, 408, 413, 422)})
 async def render_scene(scene_id: str, spec: RenderRequest, state: State):
     entry = state.get("scene", scene_id)
     camera = spec.camera
