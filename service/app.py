@@ -14,6 +14,7 @@ import anyio
 from fastapi import FastAPI, HTTPException
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from service.config import Settings, load_settings
 from service.demo import load_demo
@@ -72,6 +73,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                        seconds=settings.body_seconds)
     app.add_middleware(ServerTiming)
     app.add_exception_handler(ClientError, _client_error)
+    app.add_exception_handler(StarletteHTTPException, _http_error)
     app.add_exception_handler(RequestValidationError, _invalid_request)
     app.add_exception_handler(Exception, _unexpected)
     for module in (health, meshes, scenes):
@@ -160,6 +162,20 @@ class BodyLimit:
 
 async def _client_error(request, error):
     return JSONResponse({"detail": str(error)}, status_code=error.status)
+
+
+async def _http_error(request, error):
+    # FastAPI answers any failure to parse a JSON body but a syntax error as "There was an error
+    # parsing the body": say which
+    detail, cause = error.detail, error.__cause__
+    if error.status_code == 400 and cause is not None:
+        if isinstance(cause, RecursionError):
+            detail = "the JSON body is nested too deeply (recursion limit exceeded)"
+        elif isinstance(cause, UnicodeDecodeError):
+            detail = f"the JSON body is not valid {cause.encoding} text: {cause.reason}"
+        else:
+            detail = f"the body cannot be parsed as JSON: {cause}"
+    return JSONResponse({"detail": detail}, status_code=error.status_code, headers=error.headers)
 
 
 async def _invalid_request(request, error):

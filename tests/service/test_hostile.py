@@ -66,8 +66,9 @@ def post_raw(client, url, content, content_type="application/json"):
 @pytest.mark.parametrize("path", ["", "/intersect", "/render"])
 @pytest.mark.parametrize(("body", "words"), [
     (b"{", ["json"]), (b'{"objects": [{"type": "sphere", "center": [0, 0', ["json"]),
-    (b"\xff\xfe\x00garbage", []), (b"", []), (b"null", []), (b"[]", []),
-    (b"[" * 50_000 + b"]" * 50_000, []), (b'{"a":' * 20_000 + b"1" + b"}" * 20_000, []),
+    (b"\xff\xfe\x00garbage", []), (b"\xc3\x28", []), (b"", []), (b"null", []), (b"[]", []),
+    (b"[" * 50_000 + b"]" * 50_000, ["recursion"]),
+    (b'{"a":' * 20_000 + b"1" + b"}" * 20_000, ["recursion"]),
 ])
 def test_malformed_truncated_and_nested_json(hostile, path, body, words):
     client, url, refused = hostile
