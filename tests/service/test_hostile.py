@@ -7,6 +7,7 @@ import socket
 import struct
 import sys
 import time
+import zlib
 
 import httpx
 import numpy as np
@@ -430,3 +431,37 @@ def test_stalled_uploads_time_out_on_a_real_server():
         assert "did not all arrive" in json.loads(body)["detail"]
         scene = httpx.post(f"{url}/v1/scenes/{served.json()['id']}/intersect", json=RAY)
         assert scene.status_code == 200 and scene.json()["geom_id"] == [0]
+
+
+def test_glb_textures_are_never_decoded(hostile, monkeypatch):
+    """A 40 kB glTF whose texture is a 6000x6000 PNG (108 MB decoded): the geometry is read,
+    the image never opened."""
+    client, _, _ = hostile
+    import PIL.Image
+
+    opened = []
+    monkeypatch.setattr(PIL.Image, "open", lambda *args, **kwargs: opened.append(args))
+    side = 6000
+    rows = zlib.compress(bytes(side + 1) * side, 9)
+
+    def chunk(kind, data):
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data)))
+
+    header = struct.pack(">IIBBBBB", side, side, 8, 0, 0, 0, 0)  # 8-bit grey
+    png = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", rows)
+           + chunk(b"IEND", b""))
+    uv = np.array([[0, 0], [1, 0], [0, 1]], "<f4").tobytes()
+    gltf = triangle_gltf([{"mesh": 0}], [0], {"byteLength": 72 + len(png)})
+    gltf["meshes"][0]["primitives"][0].update(material=0)
+    gltf["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] = 2
+    gltf["bufferViews"] += [{"buffer": 0, "byteOffset": 48, "byteLength": 24},
+                            {"buffer": 0, "byteOffset": 72, "byteLength": len(png)}]
+    gltf["accessors"].append({"bufferView": 2, "componentType": 5126, "count": 3,
+                              "type": "VEC2"})
+    gltf.update(materials=[{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+                textures=[{"source": 0}], images=[{"bufferView": 3, "mimeType": "image/png"}])
+    response = post_raw(client, "/v1/meshes?format=glb", glb(gltf, TRIANGLE_BIN + uv + png),
+                        "model/gltf-binary")
+    assert response.status_code in (200, 201) and response.json()["faces"] == 1, response.text
+    assert not opened
