@@ -97,6 +97,9 @@ def validate_transform(transform):
 def load_trimesh(path_or_file, file_type=None):
     """Load a mesh file with trimesh; return a ``trimesh.Trimesh`` or ``trimesh.Scene``.
 
+    Only the geometry is read: rays need no materials, and a material's texture is an image
+    that a small file can declare huge (a 100 kB glTF with a 12000x12000 PNG took 400 MB).
+
     Raises
     ------
     ValueError
@@ -105,7 +108,8 @@ def load_trimesh(path_or_file, file_type=None):
     import trimesh
 
     try:
-        loaded = trimesh.load(path_or_file, file_type=file_type, process=False)
+        loaded = trimesh.load(path_or_file, file_type=file_type, process=False,
+                              skip_materials=True)
     except Exception as error:  # trimesh raises many exception types for unreadable input
         raise ValueError(f"could not read the mesh file: {error}") from error
     if isinstance(loaded, trimesh.Scene):

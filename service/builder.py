@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from raycore import Scene
+from raycore.mesh import load_trimesh
 from raycore.render import DEFAULT_COLOR
 from service.errors import ClientError, LimitExceeded
 from service.schemas import Bounds, MeshInfo, SceneInfo, SceneSpec
@@ -57,7 +58,7 @@ def parse_mesh(data, file_type, max_triangles):
     if file_type not in MESH_FORMATS:
         raise ClientError(f"format must be one of {MESH_FORMATS}, got {file_type!r}")
     try:
-        loaded = _load(data, file_type)
+        loaded = load_trimesh(io.BytesIO(data), file_type)
     except ValueError as error:
         raise ClientError(str(error)) from error
     if isinstance(loaded, trimesh.Scene):
@@ -86,29 +87,6 @@ def parse_mesh(data, file_type, max_triangles):
                     faces=len(faces), closed=closed,
                     bounds=Bounds(lo=used.min(axis=0).tolist(), hi=used.max(axis=0).tolist()))
     return MeshEntry(vertices, faces, info)
-
-
-def _load(data, file_type):
-    """:func:`raycore.mesh.load_trimesh` of a file's bytes, without its materials.
-
-    The service needs the geometry only, and a material's texture is an image that a small
-    file can declare huge: a 100 kB glTF with a 12000x12000 PNG took 400 MB to decode.
-    """
-    import trimesh
-
-    try:
-        loaded = trimesh.load(io.BytesIO(data), file_type=file_type, process=False,
-                              skip_materials=True)
-    except Exception as error:  # trimesh raises many exception types for unreadable input
-        raise ValueError(f"could not read the mesh file: {error}") from error
-    # the same checks as load_trimesh's
-    if isinstance(loaded, trimesh.Scene):
-        if not any(isinstance(geometry, trimesh.Trimesh) and len(geometry.faces)
-                   for geometry in loaded.geometry.values()):
-            raise ValueError("the mesh file holds no triangles")
-    elif not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
-        raise ValueError("the mesh file holds no triangles")
-    return loaded
 
 
 def _check_faces(vertices, faces, where=""):
