@@ -167,6 +167,16 @@ points = st.tuples(coordinates, coordinates, coordinates)
 directions = st.tuples(components, components, components).filter(any)
 
 
+def check_solid_bar_data(rays, expected):
+    """The bar's rays around a closed solid cover the interesting cases: hits and misses mixed,
+    every ray starting inside hits, grazing and clipped rays go both ways."""
+    hit = np.isfinite(expected)
+    assert 0.3 < hit.mean() < 0.8
+    assert hit[rays.category == "inside"].all()
+    assert 0.2 < hit[rays.category == "grazing"].mean() < 0.8
+    assert 0.1 < hit[rays.category == "clipped"].mean() < 0.9
+
+
 def scalar_reference(function, rays, *shape, count=300):
     """A scalar reference on every k-th ray of a set (about ``count`` rays, every category).
 
