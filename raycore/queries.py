@@ -18,14 +18,14 @@ CHUNK = 256
 
 @njit(cache=True, parallel=True)
 def _trace_parallel(mode, origins, directions, tmin, tmax, test, sphere_method,
-                    top_nodes, top_refs, top_order, unbounded,
+                    top_nodes, top_refs, top_order, direct,
                     kind, param_row, mesh_of, xform_row, params, xforms,
                     mesh_nodes, mesh_refs, tri_verts, node_base, tri_base,
                     out_t, out_obj, out_prim, out_u, out_v, offsets, hits_t, hits_obj, hits_prim):
     n = len(origins)
     for chunk in prange((n + CHUNK - 1) // CHUNK):
         trace_rays(mode, chunk * CHUNK, min(n, (chunk + 1) * CHUNK), origins, directions, tmin,
-                   tmax, test, sphere_method, top_nodes, top_refs, top_order, unbounded, kind,
+                   tmax, test, sphere_method, top_nodes, top_refs, top_order, direct, kind,
                    param_row, mesh_of, xform_row, params, xforms, mesh_nodes, mesh_refs,
                    tri_verts, node_base, tri_base, out_t, out_obj, out_prim, out_u, out_v,
                    offsets, hits_t, hits_obj, hits_prim)
@@ -156,6 +156,21 @@ def all_hits(origins, directions, tmin, tmax, test, sphere_method, scene):
         _sort_and_merge(offsets, *hits, kind, tri_verts, counts)
     keep = np.repeat(offsets[:-1], counts) + _ranks_within(counts)
     return counts, hits[0][keep], hits[1][keep], hits[2][keep]
+
+
+@njit(cache=True, parallel=True)
+def face_ids(obj, prim, kind, leaf_face):
+    """(N,) int64 primitive ids as users see them: the face index for a mesh hit (``prim`` is
+    a leaf-order triangle, ``leaf_face`` maps it back), 0 for an analytic shape, -1 for a miss."""
+    out = np.empty(len(obj), np.int64)
+    for i in prange(len(obj)):
+        if obj[i] < 0:
+            out[i] = -1
+        elif kind[obj[i]] == MESH:
+            out[i] = leaf_face[prim[i]]
+        else:
+            out[i] = 0
+    return out
 
 
 def _ranks_within(counts):

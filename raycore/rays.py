@@ -73,12 +73,12 @@ def as_ray_bound(value, name, count, dtype):
         array = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as error:
         raise ValueError(f"{name} must be a number or an (N,) array of numbers") from error
-    if array.ndim == 0:
-        array = np.full(count, array, dtype=np.float64)
-    elif array.shape != (count,):
+    if array.ndim != 0 and array.shape != (count,):
         raise ValueError(f"{name} must be a scalar or have shape ({count},), got {array.shape}")
     if np.any(np.isnan(array)):
         raise ValueError(f"{name} must not contain NaN")
+    if array.ndim == 0:
+        return np.full(count, array, dtype=dtype)
     return np.ascontiguousarray(array, dtype=dtype)
 
 

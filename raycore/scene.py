@@ -197,12 +197,16 @@ class Scene:
             span = np.maximum(np.abs(lo[finite]), np.abs(hi[finite])).max(axis=1, keepdims=True)
             pad = 64 * np.finfo(self.dtype).eps * span
             self._top = build_bvh(lo[finite] - pad, hi[finite] + pad, self.build_params)
-            top = (self._top.nodes, self._top.refs, bounded[self._top.order],
-                   visible[~finite])
         else:
             self._top = None
-            empty = np.zeros((0, NODE_WIDTH), np.float32)
-            top = (empty, empty.view(np.int32), np.zeros(0, np.int64), visible[~finite])
+        empty = np.zeros((0, NODE_WIDTH), np.float32)
+        if len(bounded) > 1:
+            top = (self._top.nodes, self._top.refs, bounded[self._top.order], visible[~finite])
+        else:
+            # A lone object is tested directly, like the planes: its own BVH or shape test culls
+            # as well as a top-level box would, and a ray is spared a level of traversal.
+            top = (empty, empty.view(np.int32), np.zeros(0, np.int64),
+                   np.concatenate([visible[~finite], bounded]))
 
         dtype = self.dtype
         params = np.array(self._params, dtype=dtype).reshape(-1, analytic.PARAM_WIDTH)
@@ -269,13 +273,7 @@ class Scene:
 
     def _prim_ids(self, obj, prim):
         """Map leaf-order triangles to face indices; analytic shapes have primitive 0."""
-        out = np.full(len(obj), -1, np.int64)
-        hit = obj >= 0
-        is_mesh = np.zeros(len(obj), bool)
-        is_mesh[hit] = np.asarray(self._kind)[obj[hit]] == MESH
-        out[hit & ~is_mesh] = 0
-        out[is_mesh] = self._leaf_face[prim[is_mesh]]
-        return out
+        return queries.face_ids(obj, prim, self._scene()[4], self._leaf_face)
 
     def intersect(self, origins, directions, tmin=0.0, tmax=np.inf, *,
                   triangle_test="watertight", sphere_method="precise", fields=()):

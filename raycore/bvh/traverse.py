@@ -6,7 +6,9 @@ rays, so that the traversal stacks are allocated once per range.
 
 Arrays are passed as plain arguments, never packed in tuples inside the per-ray code: Numba
 reference-counts every array it unpacks, and those atomic updates, contended between threads,
-cost more than the traversal itself.
+cost more than the traversal itself.  For the same reason the helpers that take arrays are
+inlined by Numba (``inline="always"``) while those that take scalars only are inlined by LLVM
+(``forceinline``), which compiles them once: a call that passes arrays keeps its reference counts.
 
 Robustness (DESIGN.md, "Numerics"): a watertight triangle test behind a plain slab test still
 leaks, so the box test is conservative (Ize 2013: the far distance is scaled by 1 + 2γ(n)) and
@@ -35,7 +37,7 @@ MAX_ANALYTIC_HITS = 2
 STACK_SIZE = (WIDTH - 1) * MAX_DEPTH + 2
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _ray_setup(ox, dx, dy, dz):
     """Reciprocal direction for near planes, and padded for far planes.
 
@@ -114,17 +116,22 @@ def _record(hits_t, hits_obj, hits_prim, begin, end, found, t, obj, prim):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _trace_mesh(mode, ox, oy, oz, dx, dy, dz, tmin, tmax, test, nodes, refs, tri_verts, root,
-                tri0, stack, stack_t, entry, leaf_first, leaf_count, obj, hits_t, hits_obj,
-                hits_prim, begin, end, found):
+def _trace_mesh(mode, test, ray, slabs, tmin, tmax, nodes, refs, tri_verts, root, tri0, stack,
+                stack_t, entry, leaf_first, leaf_count, obj, hits_t, hits_obj, hits_prim, begin,
+                end, found):
     """Traverse one mesh's BVH (rows from ``root``, triangles from ``tri0``) with an
-    object-space ray; ``entry``, ``leaf_first``, ``leaf_count`` are (WIDTH,) scratch arrays.
+    object-space ray ``(ox, oy, oz, dx, dy, dz)`` and its ``_ray_setup`` values ``slabs``;
+    ``entry``, ``leaf_first``, ``leaf_count`` are (WIDTH,) scratch arrays.
 
     Returns ``(t, prim, u, v, found)``: the closest hit below ``tmax`` (``prim`` is -1 if none;
     in ANY mode the first found) and, in ALL mode, the running hit count.
     """
-    ix, iy, iz, fx, fy, fz = _ray_setup(ox, dx, dy, dz)
-    kx, ky, kz, sx, sy, sz = watertight_setup(dx, dy, dz)
+    ox, oy, oz, dx, dy, dz = ray
+    ix, iy, iz, fx, fy, fz = slabs
+    # the watertight set-up waits for the first leaf: most rays that miss never reach one
+    sheared = False
+    kx = ky = kz = 0
+    sx = sy = sz = like(ox, 0)
     best_t = tmax
     best_prim = -1
     best_u = best_v = like(ox, 0)
@@ -134,6 +141,9 @@ def _trace_mesh(mode, ox, oy, oz, dx, dy, dz, tmin, tmax, test, nodes, refs, tri
         next_row, top, leaves = _descend(nodes, refs, row, root, ox, oy, oz, ix, iy, iz, fx, fy,
                                          fz, tmin, best_t, stack, stack_t, top, entry,
                                          leaf_first, leaf_count)
+        if leaves and not sheared:
+            kx, ky, kz, sx, sy, sz = watertight_setup(dx, dy, dz)
+            sheared = True
         for leaf in range(leaves):
             first = tri0 + leaf_first[leaf]
             for p in range(first, first + leaf_count[leaf]):
@@ -169,7 +179,7 @@ def _transform(m, r, x, y, z, w):
 
 @njit(cache=True, error_model="numpy")
 def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_method,
-               top_nodes, top_refs, top_order, unbounded,
+               top_nodes, top_refs, top_order, direct,
                kind, param_row, mesh_of, xform_row, params, xforms,
                mesh_nodes, mesh_refs, tri_verts, node_base, tri_base,
                out_t, out_obj, out_prim, out_u, out_v, offsets, hits_t, hits_obj, hits_prim):
@@ -183,8 +193,9 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
         The rays, in the scene's precision.
     test, sphere_method : int
         Triangle test and sphere method codes.
-    top_nodes, top_refs, top_order, unbounded
-        Top-level BVH over bounded objects, and the unbounded objects (planes) tested first.
+    top_nodes, top_refs, top_order, direct
+        Top-level BVH over bounded objects, and the objects tested directly, before it: the
+        unbounded ones (planes), and the only bounded one when there is just one.
     kind, param_row, mesh_of, xform_row, params, xforms
         Per-object kind, analytic parameter row, mesh, inverse-transform row (-1: identity);
         the (P, 20) parameter table and the (T, 12) object-from-world matrices.
@@ -210,11 +221,19 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
     mesh_leaf_count = np.empty(WIDTH, np.int64)
     has_top = len(top_nodes) > 0
     store = len(hits_t) > 0
+    # A scene of one untransformed mesh, the common case, goes straight into the mesh's BVH:
+    # the general loop over objects costs about 15 % on coherent rays.
+    lone_mesh = (not has_top and len(direct) == 1 and kind[direct[0]] == MESH
+                 and xform_row[direct[0]] < 0)
+    lone_obj = direct[0] if lone_mesh else -1
+    lone_root = node_base[mesh_of[lone_obj]] if lone_mesh else 0
+    lone_tri0 = tri_base[mesh_of[lone_obj]] if lone_mesh else 0
     for i in range(start, stop):
         ox, oy, oz = origins[i, 0], origins[i, 1], origins[i, 2]
         dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
         t_lo = tmin[i]
-        ix, iy, iz, fx, fy, fz = _ray_setup(ox, dx, dy, dz)
+        slabs = _ray_setup(ox, dx, dy, dz)
+        ix, iy, iz, fx, fy, fz = slabs
         begin = offsets[i] if store else 0
         end = offsets[i + 1] if store else 0
 
@@ -224,66 +243,78 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
         best_u = best_v = like(ox, 0)
         found = 0
         done = False
-        # The unbounded objects (planes) live outside the top-level BVH; they are processed
-        # first, as a leaf of their own, so that they can shorten the ray before traversal.
-        in_top = False
-        leaf_first[0] = 0
-        leaf_count[0] = len(unbounded)
-        leaves = 1
-        next_row = 0 if has_top else -1
-        top = 0
-        while True:
-            for leaf in range(leaves):
-                first = leaf_first[leaf]
-                for slot in range(first, first + leaf_count[leaf]):
-                    if done:
-                        break
-                    obj = top_order[slot] if in_top else unbounded[slot]
-                    k = kind[obj]
-                    if k == MESH:
-                        r = xform_row[obj]
-                        if r < 0:
-                            mox, moy, moz, mdx, mdy, mdz = ox, oy, oz, dx, dy, dz
-                        else:
-                            mox, moy, moz = _transform(xforms, r, ox, oy, oz, like(ox, 1))
-                            mdx, mdy, mdz = _transform(xforms, r, dx, dy, dz, like(ox, 0))
-                        m = mesh_of[obj]
-                        t, p, u, v, found = _trace_mesh(
-                            mode, mox, moy, moz, mdx, mdy, mdz, t_lo, best_t, test, mesh_nodes,
-                            mesh_refs, tri_verts, node_base[m], tri_base[m], mesh_stack,
-                            mesh_stack_t, entry, mesh_leaf_first, mesh_leaf_count, obj, hits_t,
-                            hits_obj, hits_prim, begin, end, found)
-                        if p >= 0:
-                            best_t, best_obj, best_prim, best_u, best_v = t, obj, p, u, v
-                            done = mode == ANY
-                        continue
-                    t_from = t_lo
-                    for _ in range(MAX_ANALYTIC_HITS if mode == ALL else 1):
-                        t, part = analytic_hit(k, params[param_row[obj]], ox, oy, oz, dx, dy,
-                                               dz, t_from, best_t, sphere_method)
-                        if t == np.inf:
+        if lone_mesh:
+            t, p, u, v, found = _trace_mesh(
+                mode, test, (ox, oy, oz, dx, dy, dz), slabs, t_lo, best_t, mesh_nodes, mesh_refs,
+                tri_verts, lone_root, lone_tri0, mesh_stack, mesh_stack_t, entry,
+                mesh_leaf_first, mesh_leaf_count, lone_obj, hits_t, hits_obj, hits_prim, begin,
+                end, found)
+            if p >= 0:
+                best_t, best_obj, best_prim, best_u, best_v = t, lone_obj, p, u, v
+        else:
+            # The direct objects live outside the top-level BVH; they are processed first, as a leaf
+            # of their own, so that they can shorten the ray before traversal.
+            in_top = False
+            leaf_first[0] = 0
+            leaf_count[0] = len(direct)
+            leaves = 1
+            next_row = 0 if has_top else -1
+            top = 0
+            while True:
+                for leaf in range(leaves):
+                    first = leaf_first[leaf]
+                    for slot in range(first, first + leaf_count[leaf]):
+                        if done:
                             break
-                        if mode == ALL:
-                            found = _record(hits_t, hits_obj, hits_prim, begin, end, found, t,
-                                            obj, part)
-                            # the next root lies strictly beyond this one
-                            t_from = np.nextafter(t, like(t, np.inf))
+                        obj = top_order[slot] if in_top else direct[slot]
+                        k = kind[obj]
+                        if k == MESH:
+                            r = xform_row[obj]
+                            if r < 0:
+                                mesh_ray = (ox, oy, oz, dx, dy, dz)
+                                mesh_slabs = slabs
+                            else:
+                                mox, moy, moz = _transform(xforms, r, ox, oy, oz, like(ox, 1))
+                                mdx, mdy, mdz = _transform(xforms, r, dx, dy, dz, like(ox, 0))
+                                mesh_ray = (mox, moy, moz, mdx, mdy, mdz)
+                                mesh_slabs = _ray_setup(mox, mdx, mdy, mdz)
+                            m = mesh_of[obj]
+                            t, p, u, v, found = _trace_mesh(
+                                mode, test, mesh_ray, mesh_slabs, t_lo, best_t, mesh_nodes,
+                                mesh_refs, tri_verts, node_base[m], tri_base[m], mesh_stack,
+                                mesh_stack_t, entry, mesh_leaf_first, mesh_leaf_count, obj, hits_t,
+                                hits_obj, hits_prim, begin, end, found)
+                            if p >= 0:
+                                best_t, best_obj, best_prim, best_u, best_v = t, obj, p, u, v
+                                done = mode == ANY
                             continue
-                        best_t, best_obj, best_prim = t, obj, part
-                        best_u = best_v = like(ox, 0)
-                        done = mode == ANY
-            if done:
-                break
-            in_top = True
-            if next_row >= 0:
-                row = next_row
-            else:
-                row, top = _pop(stack, stack_t, top, best_t)
-                if row < 0:
+                        t_from = t_lo
+                        for _ in range(MAX_ANALYTIC_HITS if mode == ALL else 1):
+                            t, part = analytic_hit(k, params[param_row[obj]], ox, oy, oz, dx, dy,
+                                                   dz, t_from, best_t, sphere_method)
+                            if t == np.inf:
+                                break
+                            if mode == ALL:
+                                found = _record(hits_t, hits_obj, hits_prim, begin, end, found, t,
+                                                obj, part)
+                                # the next root lies strictly beyond this one
+                                t_from = np.nextafter(t, like(t, np.inf))
+                                continue
+                            best_t, best_obj, best_prim = t, obj, part
+                            best_u = best_v = like(ox, 0)
+                            done = mode == ANY
+                if done:
                     break
-            next_row, top, leaves = _descend(top_nodes, top_refs, row, 0, ox, oy, oz, ix, iy, iz,
-                                             fx, fy, fz, t_lo, best_t, stack, stack_t, top,
-                                             entry, leaf_first, leaf_count)
+                in_top = True
+                if next_row >= 0:
+                    row = next_row
+                else:
+                    row, top = _pop(stack, stack_t, top, best_t)
+                    if row < 0:
+                        break
+                next_row, top, leaves = _descend(top_nodes, top_refs, row, 0, ox, oy, oz, ix, iy, iz,
+                                                 fx, fy, fz, t_lo, best_t, stack, stack_t, top,
+                                                 entry, leaf_first, leaf_count)
         if mode == ALL:
             out_obj[i] = found
             continue

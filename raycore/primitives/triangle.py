@@ -3,7 +3,9 @@
 Three tests with one contract, so that the BVH leaf loop can switch between them and the tests in
 ``tests/primitives`` can measure how they differ:
 
-* every kernel is compiled inline, takes scalars and computes in the precision of its inputs;
+* every kernel takes scalars and computes in the precision of its inputs; it is compiled once
+  and inlined by LLVM (``forceinline``), not copied into each caller by Numba
+  (``inline="always"``), which made every traversal kernel compile five times slower;
 * it returns ``(t, u, v)``: the ray parameter of the hit (``tmin <= t <= tmax``, direction not
   normalised, hit point ``o + t d``) and barycentrics with hit point ``(1-u-v) a + u b + v c``
   (Embree's and Möller's convention); on a miss ``t`` is ``inf`` and ``u``, ``v`` are NaN;
@@ -56,29 +58,29 @@ def triangle_test_code(name, argument="triangle_test"):
         ) from error
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _miss(x):
     return like(x, np.inf), like(x, np.nan), like(x, np.nan)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _dot(ax, ay, az, bx, by, bz):
     return ax * bx + ay * by + az * bz
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _cross(ax, ay, az, bx, by, bz):
     return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _triple(nx, ny, nz, ex, ey, ez, px, py, pz):
     # N·(e × p)
     cx, cy, cz = _cross(ex, ey, ez, px, py, pz)
     return _dot(nx, ny, nz, cx, cy, cz)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _component(k, x, y, z):
     if k == 0:
         return x
@@ -87,7 +89,7 @@ def _component(k, x, y, z):
     return z
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _degenerate(ax, ay, az, bx, by, bz, cx, cy, cz):
     # pbrt-v4's test: the cross product of the edges is exactly zero (a repeated vertex, or
     # collinear vertices whose edge products cancel exactly).  Comparing the components rather
@@ -97,7 +99,7 @@ def _degenerate(ax, ay, az, bx, by, bz, cx, cy, cz):
     return nx == zero and ny == zero and nz == zero
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def moller(ox, oy, oz, dx, dy, dz, tmin, tmax, ax, ay, az, bx, by, bz, cx, cy, cz):
     """Möller–Trumbore ray/triangle test (Möller & Trumbore 1997), without determinant epsilon.
 
@@ -148,7 +150,7 @@ def moller(ox, oy, oz, dx, dy, dz, tmin, tmax, ax, ay, az, bx, by, bz, cx, cy, c
     return t, u, v
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def geometric(ox, oy, oz, dx, dy, dz, tmin, tmax, ax, ay, az, bx, by, bz, cx, cy, cz):
     """Geometric ray/triangle test: hit the plane, then test the point against each edge.
 
@@ -183,7 +185,7 @@ def geometric(ox, oy, oz, dx, dy, dz, tmin, tmax, ax, ay, az, bx, by, bz, cx, cy
     return t, wb / nn, wc / nn
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def watertight_setup(dx, dy, dz):
     """Per-ray set-up of the watertight test (Woop, Benthin & Wald 2013, JCGT 2(1), §3).
 
@@ -234,7 +236,7 @@ def _edge_exact(px, py, qx, qy):
     return type(px)(float(exact))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def _product_error(a, b):
     # Dekker's TwoProduct (1971) with Veltkamp's split at 27 bits: a·b - fl(a·b), exactly, in
     # float64 without FMA (Numba does not contract a·b + c unless fastmath is on).
@@ -268,7 +270,7 @@ def _edge_exact_kernel(px, py, qx, qy):
     return impl
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def watertight(ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin, tmax, ax, ay, az, bx, by, bz, cx, cy, cz):
     """Watertight ray/triangle test (Woop, Benthin & Wald 2013, JCGT 2(1)).
 
@@ -351,7 +353,7 @@ def watertight(ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin, tmax, ax, ay, az, bx, b
     return t, v_b / det, w_c / det
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def triangle_hit(
     test, ox, oy, oz, dx, dy, dz, kx, ky, kz, sx, sy, sz, tmin, tmax,
     ax, ay, az, bx, by, bz, cx, cy, cz,
@@ -370,7 +372,7 @@ def triangle_hit(
     return geometric(ox, oy, oz, dx, dy, dz, tmin, tmax, ax, ay, az, bx, by, bz, cx, cy, cz)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, forceinline=True)
 def triangle_normal(ax, ay, az, bx, by, bz, cx, cy, cz):
     """Unit normal ``(b - a) × (c - a) / |(b - a) × (c - a)|``; NaN for a degenerate triangle."""
     nx, ny, nz = _cross(bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az)
