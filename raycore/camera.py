@@ -6,6 +6,7 @@ the view, image y grows downwards.
 """
 
 import numpy as np
+from numba import njit, prange
 
 from raycore.rays import as_float_array, resolve_dtype
 
@@ -37,12 +38,28 @@ def _pixel_grid(width, height):
     return x, y
 
 
-def _plane_points(center, right, up, across, rise, dtype):
-    """(H*W, 3) points ``center + across[w] * right + rise[h] * up`` in scanline order, summed
-    in ``dtype`` from one (W, 3) and one (H, 3) term computed in float64."""
-    row = (center + across[:, None] * right).astype(dtype)
-    column = (rise[:, None] * up).astype(dtype)
-    return (row[None] + column[:, None]).reshape(-1, 3)
+def _plane_points(center, right, up, across, rise, dtype, unit=False):
+    """(H*W, 3) points ``center + across[w] * right + rise[h] * up`` in scanline order, computed
+    in float64 and rounded once to ``dtype``; scaled to unit length when ``unit``."""
+    out = np.empty((len(rise) * len(across), 3), dtype)
+    _plane_points_kernel(center, right, up, across, rise, unit, out)
+    return out
+
+
+@njit(cache=True, parallel=True)
+def _plane_points_kernel(center, right, up, across, rise, unit, out):
+    width = len(across)
+    for h in prange(len(rise)):
+        for w in range(width):
+            x = center[0] + across[w] * right[0] + rise[h] * up[0]
+            y = center[1] + across[w] * right[1] + rise[h] * up[1]
+            z = center[2] + across[w] * right[2] + rise[h] * up[2]
+            if unit:
+                length = np.sqrt(x * x + y * y + z * z)
+                x, y, z = x / length, y / length, z / length
+            out[h * width + w, 0] = x
+            out[h * width + w, 1] = y
+            out[h * width + w, 2] = z
 
 
 def perspective_rays(position, look_at, up, fov, width, height, dtype="float64"):
@@ -76,11 +93,10 @@ def perspective_rays(position, look_at, up, fov, width, height, dtype="float64")
     across = x * np.tan(np.radians(fov) / 2) * width / height
     rise = y * np.tan(np.radians(fov) / 2)
     dtype = resolve_dtype(dtype)
-    directions = _plane_points(forward, right, true_up, across, rise, dtype)
-    # the axes are orthonormal: |forward + a right + b up|^2 = 1 + a^2 + b^2
-    directions *= (1 / np.sqrt(1 + across[None, :] ** 2 + rise[:, None] ** 2)).astype(
-        dtype).reshape(-1, 1)
-    return np.broadcast_to(position.astype(dtype), directions.shape).copy(), directions
+    directions = _plane_points(forward, right, true_up, across, rise, dtype, unit=True)
+    origins = np.empty_like(directions)
+    origins[:] = position
+    return origins, directions
 
 
 def orthographic_rays(position, look_at, up, view_height, width, height, dtype="float64"):
@@ -114,4 +130,6 @@ def orthographic_rays(position, look_at, up, view_height, width, height, dtype="
     rise = y * view_height / 2
     dtype = resolve_dtype(dtype)
     origins = _plane_points(position, right, true_up, across, rise, dtype)
-    return origins, np.broadcast_to(forward.astype(dtype), origins.shape).copy()
+    directions = np.empty_like(origins)
+    directions[:] = forward
+    return origins, directions

@@ -6,7 +6,7 @@ lit hit), ``id`` (a colour per geometry id).  Misses get the background colour.
 """
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from raycore.offset import offset_ray_origin
 
@@ -57,8 +57,9 @@ def render(scene, origins, directions, width, height, shading="lambert", *,
         raise ValueError(f"shading must be one of {SHADINGS}, got {shading!r}")
     if not 0 <= ambient <= 1:
         raise ValueError(f"ambient must be in [0, 1], got {ambient!r}")
-    origins = np.asarray(origins, dtype=np.float64)
-    directions = np.asarray(directions, dtype=np.float64)
+    # in the scene's precision, which the shadow rays start from
+    origins = np.asarray(origins, dtype=scene.dtype)
+    directions = np.asarray(directions, dtype=scene.dtype)
     if origins.shape != (width * height, 3):
         raise ValueError(f"origins must have shape ({width * height}, 3) for a {width}x{height} "
                          f"image, got {origins.shape}")
@@ -121,10 +122,10 @@ def _surface(scene, origins, directions, hits, light):
     return facing, cosine, points, reach
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, parallel=True, error_model="numpy")
 def _surface_kernel(origins, directions, t, normals, light, error_eps, facing, cosine, points,
                     reach):
-    for i in range(len(t)):
+    for i in prange(len(t)):
         if not t[i] < np.inf:
             facing[i] = 0.0
             points[i] = 0.0
@@ -146,10 +147,10 @@ def _surface_kernel(origins, directions, t, normals, light, error_eps, facing, c
         reach[i] = bound
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _shade_lambert(colors, geom_id, cosine, lit, ambient, image):
     """Colours of hits (misses are left alone): albedo * (ambient + direct light)."""
-    for i in range(len(geom_id)):
+    for i in prange(len(geom_id)):
         if geom_id[i] < 0:
             continue
         intensity = ambient + (1.0 - ambient) * (cosine[i] if lit[i] else 0.0)

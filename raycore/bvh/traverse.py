@@ -252,8 +252,8 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
             if p >= 0:
                 best_t, best_obj, best_prim, best_u, best_v = t, lone_obj, p, u, v
         else:
-            # The direct objects live outside the top-level BVH; they are processed first, as a leaf
-            # of their own, so that they can shorten the ray before traversal.
+            # The direct objects live outside the top-level BVH; they are processed first, as a
+            # leaf of their own, so that they can shorten the ray before traversal.
             in_top = False
             leaf_first[0] = 0
             leaf_count[0] = len(direct)
@@ -312,9 +312,9 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
                     row, top = _pop(stack, stack_t, top, best_t)
                     if row < 0:
                         break
-                next_row, top, leaves = _descend(top_nodes, top_refs, row, 0, ox, oy, oz, ix, iy, iz,
-                                                 fx, fy, fz, t_lo, best_t, stack, stack_t, top,
-                                                 entry, leaf_first, leaf_count)
+                next_row, top, leaves = _descend(top_nodes, top_refs, row, 0, ox, oy, oz, ix, iy,
+                                                 iz, fx, fy, fz, t_lo, best_t, stack, stack_t,
+                                                 top, entry, leaf_first, leaf_count)
         if mode == ALL:
             out_obj[i] = found
             continue
