@@ -1,11 +1,11 @@
 """The FastAPI app: routers, error handlers, the body size limit, and startup."""
 
+import asyncio
 import ctypes
 import ctypes.util
 import logging
 import os
 import sys
-import threading
 import time
 from contextlib import asynccontextmanager
 from importlib.metadata import version
@@ -86,11 +86,15 @@ async def _lifespan(app):
     state = app.state.runtime
     state.limiter = anyio.CapacityLimiter(state.settings.compute_slots)
     if state.settings.demo:
-        # in the background, so that /healthz answers while kernels load
-        threading.Thread(target=load_demo, args=(state,), name="raycore-demo", daemon=True).start()
+        # In the background, so that /healthz answers while kernels load, and in a compute slot,
+        # so that no request's kernels run beside the demo's: Numba's workqueue threading layer
+        # (the image's) aborts the process when two threads launch parallel loops at once.
+        demo = asyncio.create_task(state.compute(load_demo, state))
     else:
         state.ready.set()
     yield
+    if state.settings.demo:
+        await demo  # a worker thread cannot be stopped: shutting down waits for it
 
 
 class ServerTiming:

@@ -68,7 +68,8 @@ def load_demo(state):
     """Build the demo scene into ``state.store`` (pinned, alias ``demo``), load the kernels that
     requests use by answering a few queries, then mark ``state`` ready.
 
-    Runs in a background thread at startup: a failure is logged and leaves /readyz at 503.
+    Runs at startup as compute work (:meth:`service.runtime.Runtime.compute`): a failure is
+    logged and leaves /readyz at 503.
     """
     try:
         entry, held = build_scene(demo_spec(), state.store.get, state.settings.max_triangles)

@@ -1,5 +1,6 @@
 """Health, readiness and the demo scene."""
 
+import threading
 import time
 from dataclasses import replace
 
@@ -7,10 +8,11 @@ import numpy as np
 import trimesh
 from fastapi.testclient import TestClient
 
+import service.app
 from service.app import create_app
 from service.demo import DEMO_CAMERA, demo_spec, torus
 
-from .data import SETTINGS
+from .data import SETTINGS, SPEC
 from .test_render_png import decode
 
 
@@ -43,6 +45,26 @@ def test_demo_scene_is_served_and_renders():
                                  json={"camera": DEMO_CAMERA, "shading": "id"}))
         assert np.all(image[-1] != 0)
         assert len(np.unique(ids.reshape(-1, 3), axis=0)) == info["objects"] + 1  # + background
+
+
+def test_demo_loads_in_a_compute_slot(monkeypatch):
+    # Numba's workqueue layer (the image's) aborts when two threads run parallel loops at once,
+    # so a request's kernels must wait for the demo's
+    loading, released_at = threading.Event(), []
+
+    def slow_demo(state):
+        loading.set()
+        time.sleep(1.0)
+        released_at.append(time.monotonic())
+        state.ready.set()
+
+    monkeypatch.setattr(service.app, "load_demo", slow_demo)
+    with TestClient(create_app(replace(SETTINGS, demo=True))) as client:
+        assert loading.wait(10)
+        assert client.get("/healthz").status_code == 200 and not released_at
+        assert client.post("/v1/scenes", json=SPEC).status_code == 201
+        assert released_at and time.monotonic() > released_at[0]
+        wait_ready(client)
 
 
 def test_torus_is_closed_and_consistently_wound():
