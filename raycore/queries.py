@@ -8,7 +8,7 @@ import numpy as np
 from numba import njit, parallel_chunksize, prange
 
 from raycore._fp import like, unit_roundoff
-from raycore.bvh.traverse import ALL, ANY, CLOSEST, MESH, trace_rays
+from raycore.bvh.traverse import ALL, ANY, CLOSEST, MESH, new_scratch, trace_rays
 from raycore.primitives.analytic import analytic_surface
 from raycore.primitives.triangle import triangle_normal
 
@@ -26,11 +26,12 @@ def _trace_parallel(mode, origins, directions, tmin, tmax, test, sphere_method,
                     out_t, out_obj, out_prim, out_u, out_v, offsets, hits_t, hits_obj, hits_prim):
     n = len(origins)
     for chunk in prange((n + CHUNK - 1) // CHUNK):
+        stacks, stacks_t, leaves, entry = new_scratch(origins)
         trace_rays(mode, chunk * CHUNK, min(n, (chunk + 1) * CHUNK), origins, directions, tmin,
                    tmax, test, sphere_method, top_nodes, top_refs, top_order, direct, kind,
                    param_row, mesh_of, xform_row, params, xforms, mesh_nodes, mesh_refs,
                    tri_verts, node_base, tri_base, out_t, out_obj, out_prim, out_u, out_v,
-                   offsets, hits_t, hits_obj, hits_prim)
+                   offsets, hits_t, hits_obj, hits_prim, stacks, stacks_t, leaves, entry)
 
 
 def _trace(mode, origins, directions, tmin, tmax, test, sphere_method, scene, outputs=None,
