@@ -1,37 +1,38 @@
 """Batch ray queries over a packed scene: compiled loops in parallel over rays.
 
-Each loop hands rays to :func:`raycore.bvh.traverse.trace_ray` in chunks; a chunk owns its
-traversal stacks, so nothing is allocated per ray.
+Each loop hands rays to :func:`raycore.bvh.traverse.trace_rays` in chunks, with the scratch
+(traversal stacks) of the thread that runs the chunk: nothing is allocated, nor
+reference-counted, per ray.
 """
 
 import numpy as np
-from numba import njit, parallel_chunksize, prange
+from numba import get_num_threads, get_thread_id, njit, parallel_chunksize, prange
 
 from raycore._fp import like, unit_roundoff
 from raycore.bvh.traverse import ALL, ANY, CLOSEST, MESH, new_scratch, trace_rays
 from raycore.primitives.analytic import analytic_surface
 from raycore.primitives.triangle import triangle_normal
 
-#: Rays per parallel work item: enough to amortise the stacks, few enough to balance cores.  Each
-#: item allocates its stacks; with 256 rays per item, malloc's lock contended between threads
-#: (the service limits glibc to two arenas) made 1M camera rays 25-50 % slower.
+#: Rays per parallel work item: enough to amortise a call's set-up, few enough to balance cores.
 CHUNK = 1024
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, _nrt=False)
 def _trace_parallel(mode, origins, directions, tmin, tmax, test, sphere_method,
                     top_nodes, top_refs, top_order, direct,
                     kind, param_row, mesh_of, xform_row, params, xforms,
                     mesh_nodes, mesh_refs, tri_verts, node_base, tri_base,
-                    out_t, out_obj, out_prim, out_u, out_v, offsets, hits_t, hits_obj, hits_prim):
+                    out_t, out_obj, out_prim, out_u, out_v, offsets, hits_t, hits_obj, hits_prim,
+                    int_scratch, real_scratch):
     n = len(origins)
     for chunk in prange((n + CHUNK - 1) // CHUNK):
-        stacks, stacks_t, leaves, entry = new_scratch(origins)
+        thread = get_thread_id()
         trace_rays(mode, chunk * CHUNK, min(n, (chunk + 1) * CHUNK), origins, directions, tmin,
                    tmax, test, sphere_method, top_nodes, top_refs, top_order, direct, kind,
                    param_row, mesh_of, xform_row, params, xforms, mesh_nodes, mesh_refs,
                    tri_verts, node_base, tri_base, out_t, out_obj, out_prim, out_u, out_v,
-                   offsets, hits_t, hits_obj, hits_prim, stacks, stacks_t, leaves, entry)
+                   offsets, hits_t, hits_obj, hits_prim, int_scratch[thread],
+                   real_scratch[thread])
 
 
 def _trace(mode, origins, directions, tmin, tmax, test, sphere_method, scene, outputs=None,
@@ -49,7 +50,7 @@ def _trace(mode, origins, directions, tmin, tmax, test, sphere_method, scene, ou
     # ten times cheaper than a hit), and static halves would leave one core idle
     with parallel_chunksize(1):
         _trace_parallel(mode, origins, directions, tmin, tmax, test, sphere_method, *scene,
-                        *outputs, offsets, *hits)
+                        *outputs, offsets, *hits, *new_scratch(get_num_threads(), origins.dtype))
     return outputs
 
 

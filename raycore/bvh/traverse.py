@@ -179,23 +179,36 @@ def _transform(m, r, x, y, z, w):
     )
 
 
-@njit(cache=True, inline="always")
-def new_scratch(origins):
-    """Scratch memory for one :func:`trace_rays` call, in the rays' precision.
+#: Elements of each thread's scratch row: the leaf lists and two stacks (integers), or the entry
+#: distances and the stacks' distances (reals).
+INT_SCRATCH = 4 * WIDTH + 2 * STACK_SIZE
+REAL_SCRATCH = WIDTH + 2 * STACK_SIZE
+
+#: Bytes of a cache line, and the least left unused after each thread's row: two threads' scratch
+#: never share a line (that false sharing made a ray that misses the mesh three times slower),
+#: and each row starts on a line, so that the vector store of entry distances never straddles two.
+LINE = 64
+SCRATCH_GAP = 2 * LINE
+
+
+def new_scratch(threads, dtype):
+    """Scratch memory for :func:`trace_rays`: one row per thread, in the rays' precision.
 
     Returns
     -------
-    stacks : ndarray of int64, shape (2, STACK_SIZE)
-        Pending nodes of the top-level BVH and of a mesh's BVH.
-    stacks_t : ndarray, shape (2, STACK_SIZE)
-        Their entry distances.
-    leaves : ndarray of int64, shape (4, WIDTH)
-        First primitive and count of the leaves a node test entered, top level and mesh.
-    entry : ndarray, shape (WIDTH,)
-        A node test's entry distances.
+    int_scratch : ndarray of int64, shape (threads, >= INT_SCRATCH)
+    real_scratch : ndarray of dtype, shape (threads, >= REAL_SCRATCH)
+        Rows start on cache lines.
     """
-    return (np.empty((2, STACK_SIZE), np.int64), np.empty((2, STACK_SIZE), origins.dtype),
-            np.empty((4, WIDTH), np.int64), np.empty(WIDTH, origins.dtype))
+    return _line_rows(threads, INT_SCRATCH, np.int64), _line_rows(threads, REAL_SCRATCH, dtype)
+
+
+def _line_rows(threads, count, dtype):
+    item = np.dtype(dtype).itemsize
+    stride = -(-(count * item + SCRATCH_GAP) // LINE) * LINE // item
+    memory = np.empty(threads * stride + LINE // item, dtype)
+    start = -memory.ctypes.data % LINE // item
+    return memory[start:start + threads * stride].reshape(threads, stride)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -204,7 +217,7 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
                kind, param_row, mesh_of, xform_row, params, xforms,
                mesh_nodes, mesh_refs, tri_verts, node_base, tri_base,
                out_t, out_obj, out_prim, out_u, out_v, offsets, hits_t, hits_obj, hits_prim,
-               stacks, stacks_t, leaves, entry):
+               int_scratch, real_scratch):
     """Trace rays ``start .. stop - 1`` through a scene.
 
     Parameters
@@ -231,13 +244,18 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
     offsets, hits_t, hits_obj, hits_prim : ndarray
         ALL mode: ray i's hits go to ``[offsets[i], offsets[i + 1])`` of the hit buffers, which
         may be empty to only count them.
-    stacks, stacks_t, leaves, entry : ndarray
-        Scratch, from :func:`new_scratch`.
+    int_scratch, real_scratch : ndarray, shape (>= INT_SCRATCH,) and (>= REAL_SCRATCH,)
+        Scratch: a row of each of :func:`new_scratch`'s arrays.
     """
-    stack, mesh_stack = stacks[0], stacks[1]
-    stack_t, mesh_stack_t = stacks_t[0], stacks_t[1]
-    leaf_first, leaf_count = leaves[0], leaves[1]
-    mesh_leaf_first, mesh_leaf_count = leaves[2], leaves[3]
+    leaf_first = int_scratch[:WIDTH]
+    leaf_count = int_scratch[WIDTH:2 * WIDTH]
+    mesh_leaf_first = int_scratch[2 * WIDTH:3 * WIDTH]
+    mesh_leaf_count = int_scratch[3 * WIDTH:4 * WIDTH]
+    stack = int_scratch[4 * WIDTH:4 * WIDTH + STACK_SIZE]
+    mesh_stack = int_scratch[4 * WIDTH + STACK_SIZE:INT_SCRATCH]
+    entry = real_scratch[:WIDTH]
+    stack_t = real_scratch[WIDTH:WIDTH + STACK_SIZE]
+    mesh_stack_t = real_scratch[WIDTH + STACK_SIZE:REAL_SCRATCH]
     has_top = len(top_nodes) > 0
     store = len(hits_t) > 0
     # A scene of one untransformed mesh, the common case, goes straight into the mesh's BVH:
