@@ -39,6 +39,11 @@ def as_real_array(value, name, dtype, shape=None):
     ValueError
         On a non-numeric value or a shape mismatch.
     """
+    return _converted(_real_array(value, name, shape), dtype)
+
+
+def _real_array(value, name, shape):
+    """``value`` as an array of real numbers of ``shape``, as it is (see :func:`as_real_array`)."""
     try:
         array = np.asarray(value)
     except (TypeError, ValueError) as error:
@@ -51,6 +56,11 @@ def as_real_array(value, name, dtype, shape=None):
     ):
         expected = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
         raise ValueError(f"{name} must have shape {expected}, got {array.shape}")
+    return array
+
+
+def _converted(array, dtype):
+    """A C-contiguous ``dtype`` copy of ``array``, or ``array`` itself when it is one."""
     # values beyond float32's range become inf here; callers refuse them as non-finite
     with np.errstate(over="ignore"):
         return np.ascontiguousarray(array, dtype=dtype)
@@ -86,25 +96,51 @@ def as_ray_bound(value, name, count, dtype):
 _FINE, _BAD_ORIGIN, _BAD_DIRECTION, _ZERO_DIRECTION = 0, 1, 2, 3
 
 
+@njit(cache=True, inline="always")
+def _status_of(origins, directions, i):
+    """What is wrong with ray ``i`` (one of the codes above)."""
+    finite_origin = True
+    finite_direction = True
+    nonzero = False
+    for a in range(3):
+        finite_origin &= np.isfinite(origins[i, a])
+        finite_direction &= np.isfinite(directions[i, a])
+        nonzero |= directions[i, a] != 0
+    if not finite_origin:
+        return _BAD_ORIGIN
+    if not finite_direction:
+        return _BAD_DIRECTION
+    if not nonzero:
+        return _ZERO_DIRECTION
+    return _FINE
+
+
 @njit(cache=True, parallel=True)
 def _ray_status(origins, directions):
     """(N,) uint8: what is wrong with each ray, in one pass and without temporaries."""
-    status = np.zeros(len(origins), np.uint8)
+    status = np.empty(len(origins), np.uint8)
     for i in prange(len(origins)):
-        finite_origin = True
-        finite_direction = True
-        nonzero = False
-        for a in range(3):
-            finite_origin &= np.isfinite(origins[i, a])
-            finite_direction &= np.isfinite(directions[i, a])
-            nonzero |= directions[i, a] != 0
-        if not finite_origin:
-            status[i] = _BAD_ORIGIN
-        elif not finite_direction:
-            status[i] = _BAD_DIRECTION
-        elif not nonzero:
-            status[i] = _ZERO_DIRECTION
+        status[i] = _status_of(origins, directions, i)
     return status
+
+
+@njit(cache=True, parallel=True)
+def _gather_rays(origins, directions):
+    """Contiguous copies of strided (N, 3) rays, and each ray's status, in one pass.
+
+    NumPy copies rows of three strided numbers one short inner loop at a time: for the columns
+    of an (N, 6) ray table this pass is about five times faster.
+    """
+    n = len(origins)
+    out_origins = np.empty((n, 3), origins.dtype)
+    out_directions = np.empty((n, 3), directions.dtype)
+    status = np.empty(n, np.uint8)
+    for i in prange(n):
+        for a in range(3):
+            out_origins[i, a] = origins[i, a]
+            out_directions[i, a] = directions[i, a]
+        status[i] = _status_of(out_origins, out_directions, i)
+    return out_origins, out_directions, status
 
 
 def prepare_rays(origins, directions, tmin=0.0, tmax=np.inf, dtype=np.float64):
@@ -130,10 +166,17 @@ def prepare_rays(origins, directions, tmin=0.0, tmax=np.inf, dtype=np.float64):
         Naming ``origins``, ``directions``, ``tmin`` or ``tmax``: wrong shape or dtype, NaN or inf
         coordinates, zero-length directions, NaN bounds.
     """
-    # finiteness is checked with the zero directions, in one compiled pass
-    origins = as_real_array(origins, "origins", dtype, (None, 3))
-    directions = as_real_array(directions, "directions", dtype, (len(origins), 3))
-    status = _ray_status(origins, directions)
+    # finiteness is checked with the zero directions, in one compiled pass, which also makes
+    # strided rays of the right precision (the columns of an (N, 6) table) contiguous
+    origins = _real_array(origins, "origins", (None, 3))
+    directions = _real_array(directions, "directions", (len(origins), 3))
+    if all(array.dtype == dtype and not array.flags.c_contiguous
+           for array in (origins, directions)):
+        origins, directions, status = _gather_rays(origins, directions)
+    else:
+        origins = _converted(origins, dtype)
+        directions = _converted(directions, dtype)
+        status = _ray_status(origins, directions)
     if status.any():
         bad = np.flatnonzero(status)
         first = int(bad[0])

@@ -53,6 +53,27 @@ def test_bad_rays_raise_value_errors_naming_the_argument(dtype, query, case):
         getattr(small_scene(dtype), query)(**arguments)
 
 
+@pytest.mark.parametrize("problem", ["origins-nan", "directions-inf", "directions-zero"])
+def test_strided_rays_answer_and_fail_like_contiguous_ones(dtype, problem):
+    # the columns of an (N, 6) table in the scene's precision take the compiled gather; other
+    # arrays are converted by NumPy
+    rng = np.random.default_rng(3)
+    table = np.hstack([rng.normal(size=(50, 3)), rng.normal(size=(50, 3))]).astype(dtype)
+    scene = small_scene(dtype)
+    strided = scene.intersect(table[:, :3], table[:, 3:], fields=("normal",))
+    contiguous = scene.intersect(table[:, :3].copy(), table[:, 3:].copy(), fields=("normal",))
+    for name in ("t", "geom_id", "prim_id", "normal"):
+        np.testing.assert_array_equal(getattr(strided, name), getattr(contiguous, name))
+    column, value = {"origins-nan": (0, np.nan), "directions-inf": (4, np.inf),
+                     "directions-zero": (slice(3, 6), 0.0)}[problem]
+    table[[7, 30], column] = value
+    with pytest.raises(ValueError) as expected:
+        scene.intersect(table[:, :3].copy(), table[:, 3:].copy())
+    with pytest.raises(ValueError, match="2 bad ray\\(s\\), first at index 7") as raised:
+        scene.intersect(table[:, :3], table[:, 3:])
+    assert str(raised.value) == str(expected.value)
+
+
 @pytest.mark.parametrize("fields", [("colour",), ("uv", "depth"), "normals", (1,)])
 def test_unknown_fields_raise(dtype, fields):
     with pytest.raises(ValueError, match="fields"):
