@@ -25,18 +25,26 @@ def accepts_npy(accept):
     return any(part.split(";")[0].strip().lower() == NPY for part in accept.split(","))
 
 
+#: Bytes of an .npy file that can hold its header: NumPy refuses headers over 10,000 bytes.
+_NPY_HEADER_MAX = 65536
+
+
 def read_npy(body):
     """Parse an .npy body into an array of floats without copying it, trusting nothing.
 
     Only the 1.0 and 2.0 formats; the header is parsed as a literal (never unpickled), object and
     structured dtypes are refused, and the body's length must match the announced shape.
 
+    Parameters
+    ----------
+    body : bytes-like
+
     Raises
     ------
     BadRequest
         Saying what does not match.
     """
-    stream = io.BytesIO(body)
+    stream = io.BytesIO(memoryview(body)[:_NPY_HEADER_MAX])
     try:
         version = np.lib.format.read_magic(stream)
         if version == (1, 0):

@@ -11,6 +11,7 @@ from raycore.camera import orthographic_rays, perspective_rays
 from raycore.render import render
 from service import codecs
 from service.auth import require_api_key
+from service.bodies import read_body
 from service.builder import build_scene, scene_id
 from service.demo import DEMO_CAMERA
 from service.errors import ClientError, LimitExceeded, UnsupportedMedia
@@ -93,7 +94,7 @@ async def intersect(scene_id: str, request: Request, state: State,
                                f"got {media_type or 'none'}")
     if media_type == "application/json" and request.query_params:
         raise ClientError("with a JSON body, query options go in the body, not the URL")
-    body = await request.body()
+    body = await (read_body(request) if media_type == codecs.NPY else request.body())
     as_npy = codecs.accepts_npy(request.headers.get("accept", ""))
     max_rays = state.settings.max_rays
 
