@@ -6,7 +6,7 @@ the view, image y grows downwards.
 """
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from raycore.rays import as_float_array, resolve_dtype
 
@@ -46,10 +46,10 @@ def _plane_points(center, right, up, across, rise, dtype, unit=False):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _plane_points_kernel(center, right, up, across, rise, unit, out):
     width = len(across)
-    for h in range(len(rise)):
+    for h in prange(len(rise)):
         for w in range(width):
             x = center[0] + across[w] * right[0] + rise[h] * up[0]
             y = center[1] + across[w] * right[1] + rise[h] * up[1]

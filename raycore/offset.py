@@ -9,7 +9,7 @@ near the origin where units in the last place become tiny.
 """
 
 import numpy as np
-from numba import njit, types
+from numba import njit, prange, types
 from numba.extending import overload
 
 from raycore._fp import like
@@ -42,9 +42,9 @@ def _step_ulps(x, steps):
     return impl
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, parallel=True, error_model="numpy")
 def _offset(points, normals, directions, reach, near, float_scale, int_scale, out):
-    for i in range(len(points)):
+    for i in prange(len(points)):
         facing = (normals[i, 0] * directions[i, 0] + normals[i, 1] * directions[i, 1]
                   + normals[i, 2] * directions[i, 2])
         side = like(near, -1.0) if facing < 0 else like(near, 1.0)

@@ -6,7 +6,7 @@ lit hit), ``id`` (a colour per geometry id).  Misses get the background colour.
 """
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from raycore.offset import offset_ray_origin
 
@@ -122,10 +122,10 @@ def _surface(scene, origins, directions, hits, light):
     return facing, cosine, points, reach
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, parallel=True, error_model="numpy")
 def _surface_kernel(origins, directions, t, normals, light, error_eps, facing, cosine, points,
                     reach):
-    for i in range(len(t)):
+    for i in prange(len(t)):
         if not t[i] < np.inf:
             facing[i] = 0.0
             points[i] = 0.0
@@ -147,10 +147,10 @@ def _surface_kernel(origins, directions, t, normals, light, error_eps, facing, c
         reach[i] = bound
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def _shade_lambert(colors, geom_id, cosine, lit, ambient, image):
     """Colours of hits (misses are left alone): albedo * (ambient + direct light)."""
-    for i in range(len(geom_id)):
+    for i in prange(len(geom_id)):
         if geom_id[i] < 0:
             continue
         intensity = ambient + (1.0 - ambient) * (cosine[i] if lit[i] else 0.0)
