@@ -36,13 +36,15 @@ def _trace_parallel(mode, origins, directions, tmin, tmax, test, sphere_method,
 
 
 def _trace(mode, origins, directions, tmin, tmax, test, sphere_method, scene, outputs=None,
-           offsets=None, hits=None):
+           offsets=None, hits=None, barycentrics=False):
     """Run :func:`trace_rays` over all rays in parallel; ``scene`` is the packed tuple of
-    arrays of ``Scene``.  Returns ``outputs``, allocated when not given."""
+    arrays of ``Scene``.  Returns ``outputs``, allocated when not given, whose u and v are
+    empty unless ``barycentrics``."""
     n = len(origins)
     if outputs is None:
+        kept = n if barycentrics else 0
         outputs = (np.empty(n, origins.dtype), np.empty(n, np.int64), np.empty(n, np.int64),
-                   np.empty(n, origins.dtype), np.empty(n, origins.dtype))
+                   np.empty(kept, origins.dtype), np.empty(kept, origins.dtype))
     if hits is None:
         hits = (np.empty(0, origins.dtype), np.empty(0, np.int64), np.empty(0, np.int64))
         offsets = np.zeros(1, np.int64)
@@ -54,7 +56,7 @@ def _trace(mode, origins, directions, tmin, tmax, test, sphere_method, scene, ou
     return outputs
 
 
-def closest_hits(origins, directions, tmin, tmax, test, sphere_method, scene):
+def closest_hits(origins, directions, tmin, tmax, test, sphere_method, scene, barycentrics):
     """Closest hit of each ray.
 
     Returns
@@ -63,10 +65,11 @@ def closest_hits(origins, directions, tmin, tmax, test, sphere_method, scene):
         inf on a miss.
     obj, prim : ndarray of int64, shape (N,)
         Object (geometry id) and leaf-order triangle or analytic surface part; -1 on a miss.
-    u, v : ndarray, shape (N,)
+    u, v : ndarray, shape (N,), or (0,) unless ``barycentrics``
         Barycentrics of triangle hits.
     """
-    return _trace(CLOSEST, origins, directions, tmin, tmax, test, sphere_method, scene)
+    return _trace(CLOSEST, origins, directions, tmin, tmax, test, sphere_method, scene,
+                  barycentrics=barycentrics)
 
 
 def any_hits(origins, directions, tmin, tmax, test, sphere_method, scene):

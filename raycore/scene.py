@@ -298,7 +298,7 @@ class Scene:
         scene = self._scene()
         t, obj, prim, u, v = queries.closest_hits(
             origins, directions, tmin, tmax, triangle_test_code(triangle_test),
-            analytic.sphere_method_code(sphere_method), scene)
+            analytic.sphere_method_code(sphere_method), scene, barycentrics=bool(fields))
         surface = {}
         if fields:
             kind, param_row, _, xform_row, params, xforms = scene[4:10]

@@ -239,8 +239,8 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
         first row and first triangle.
     out_t, out_obj, out_prim, out_u, out_v : ndarray, shape (N,)
         CLOSEST and ANY: the hit's t (inf on a miss), object (-1 on a miss), primitive (leaf-order
-        triangle, or the analytic shape's surface part) and barycentrics.  ALL: ``out_obj``
-        receives each ray's hit count.
+        triangle, or the analytic shape's surface part) and barycentrics (skipped when ``out_u``
+        is empty).  ALL: ``out_obj`` receives each ray's hit count.
     offsets, hits_t, hits_obj, hits_prim : ndarray
         ALL mode: ray i's hits go to ``[offsets[i], offsets[i + 1])`` of the hit buffers, which
         may be empty to only count them.
@@ -258,6 +258,7 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
     mesh_stack_t = real_scratch[WIDTH + STACK_SIZE:REAL_SCRATCH]
     has_top = len(top_nodes) > 0
     store = len(hits_t) > 0
+    barycentrics = len(out_u) > 0
     # A scene of one untransformed mesh, the common case, goes straight into the mesh's BVH:
     # the general loop over objects costs about 15 % on coherent rays.
     lone_mesh = (not has_top and len(direct) == 1 and kind[direct[0]] == MESH
@@ -358,5 +359,6 @@ def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_
         out_t[i] = best_t if best_obj >= 0 else like(ox, np.inf)
         out_obj[i] = best_obj
         out_prim[i] = best_prim
-        out_u[i] = best_u
-        out_v[i] = best_v
+        if barycentrics:
+            out_u[i] = best_u
+            out_v[i] = best_v
