@@ -3,7 +3,8 @@
 Same meshes, same rays, one process.  For every mesh: build times and memory per triangle, then
 closest-hit throughput on 1024x1024 primary camera rays (coherent) and 1M random rays from inside
 the bounds (incoherent), reported in Mrays/s and as ratios to each anchor.  Machines are noisy:
-the ratios are what count.  Results go to benchmarks/results/bench.json and bench.md.
+the ratios are what count, so raycore and Open3D (both multi-threaded) are timed in interleaved
+rounds, best of ``ROUNDS``.  Results go to benchmarks/results/bench.json and bench.md.
 
 Run with ``make bench`` (or ``python -m benchmarks.run [--quick]``).
 """
@@ -12,6 +13,7 @@ import argparse
 import json
 import platform
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +29,10 @@ RESULTS = Path(__file__).resolve().parent / "results"
 TRIMESH_SAMPLE = {"camera": 2000, "random": 300}
 
 
+#: Timed calls of each multi-threaded contender (raycore, Open3D) per ray set, interleaved
+ROUNDS = 5
+
+
 def best_time(function, *args, repeats=3):
     """Smallest wall time of ``repeats`` calls of ``function(*args)``, and the last result."""
     best = np.inf
@@ -36,6 +42,19 @@ def best_time(function, *args, repeats=3):
         result = function(*args)
         best = min(best, time.perf_counter() - start)
     return best, result
+
+
+def interleaved_best_times(calls, rounds=ROUNDS):
+    """Smallest wall time of each of ``calls`` (name -> function of no arguments) over
+    ``rounds`` rounds that call each once in turn, so that the machine's drifts in load reach
+    every contender alike; and each call's last result."""
+    best = dict.fromkeys(calls, np.inf)
+    results = {}
+    for _ in range(rounds):
+        for name, call in calls.items():
+            seconds, results[name] = best_time(call, repeats=1)
+            best[name] = min(best[name], seconds)
+    return best, results
 
 
 def meshes(quick):
@@ -79,18 +98,21 @@ def bench_mesh(name, vertices, faces, ray_count, camera_size):
         seconds, (t_ref, prim_ref) = best_time(anchors["embreex"].closest, origins32,
                                                directions32, repeats=1)
         row["mrays_s"]["embreex"] = len(origins) / seconds / 1e6
-        seconds, _ = best_time(anchors["open3d"].closest, origins32, directions32)
-        row["mrays_s"]["open3d"] = len(origins) / seconds / 1e6
         sample = TRIMESH_SAMPLE[kind]
         seconds, _ = best_time(anchors["trimesh"].closest, origins[:sample], directions[:sample],
                                repeats=1)
         row["mrays_s"]["trimesh"] = sample / seconds / 1e6
+        rays = {"float32": (origins32, directions32), "float64": (origins, directions)}
+        calls = {"open3d": partial(anchors["open3d"].closest, origins32, directions32)}
         for dtype, scene in scenes.items():
-            o = origins32 if dtype == "float32" else origins
-            d = directions32 if dtype == "float32" else directions
+            o, d = rays[dtype]
             scene.intersect(o[:1000], d[:1000])  # compile or load the kernels outside the timing
-            seconds, hits = best_time(scene.intersect, o, d)
-            row["mrays_s"][f"raycore-{dtype}"] = len(origins) / seconds / 1e6
+            calls[f"raycore-{dtype}"] = partial(scene.intersect, o, d)
+        seconds, results = interleaved_best_times(calls)
+        for name, best in seconds.items():
+            row["mrays_s"][name] = len(origins) / best / 1e6
+        for dtype in scenes:
+            hits = results[f"raycore-{dtype}"]
             both = np.isfinite(hits.t) & np.isfinite(t_ref)
             row["agreement_with_embree"][dtype] = {
                 "same_prim": float(np.mean(hits.prim_id == prim_ref)),
