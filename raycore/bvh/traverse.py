@@ -2,7 +2,7 @@
 
 One routine serves every query (``mode``): the top-level BVH over objects (analytic shapes and
 mesh instances) and, inside an instance, the mesh's own BVH in object space.  It traces a range of
-rays, so that the traversal stacks are allocated once per range.
+rays with the scratch (traversal stacks) of the thread that runs it, allocated once per batch.
 
 ``trace_rays`` is compiled without Numba's reference counting (``_nrt=False``): every array it
 touches is borrowed from its caller, which also allocates its scratch (:func:`new_scratch`).
@@ -204,6 +204,8 @@ def new_scratch(threads, dtype):
 
 
 def _line_rows(threads, count, dtype):
+    """Uninitialised (threads, >= count) array whose rows start on cache lines, SCRATCH_GAP
+    bytes or more apart."""
     item = np.dtype(dtype).itemsize
     stride = -(-(count * item + SCRATCH_GAP) // LINE) * LINE // item
     memory = np.empty(threads * stride + LINE // item, dtype)
