@@ -192,19 +192,18 @@ class Scene:
         hi = np.array([b[1] for b in bounds]).reshape(-1, 3)
         finite = np.all(np.isfinite(lo) & np.isfinite(hi), axis=1)
         bounded = visible[finite]
+        self._top = None  # the tree over bounded objects also gives the scene's bounds
         if len(bounded):
             # instance boxes are computed from rounded transforms: pad them by a few ulps
             span = np.maximum(np.abs(lo[finite]), np.abs(hi[finite])).max(axis=1, keepdims=True)
             pad = 64 * np.finfo(self.dtype).eps * span
             self._top = build_bvh(lo[finite] - pad, hi[finite] + pad, self.build_params)
-        else:
-            self._top = None
-        empty = np.zeros((0, NODE_WIDTH), np.float32)
         if len(bounded) > 1:
             top = (self._top.nodes, self._top.refs, bounded[self._top.order], visible[~finite])
         else:
             # A lone object is tested directly, like the planes: its own BVH or shape test culls
             # as well as a top-level box would, and a ray is spared a level of traversal.
+            empty = np.zeros((0, NODE_WIDTH), np.float32)
             top = (empty, empty.view(np.int32), np.zeros(0, np.int64),
                    np.concatenate([visible[~finite], bounded]))
 
