@@ -1,6 +1,7 @@
 """HTTP service overhead: the service's answers against in-process ``Scene`` calls, same scene.
 
-A real ``raycore serve`` (uvicorn) on loopback, driven with httpx, and a ~100k-triangle scene
+A real ``raycore serve`` (uvicorn) on loopback, driven with the service's Python client
+(:class:`service.client.Client`), and a ~100k-triangle scene
 (nefertiti from ../shared/meshes when present, else a procedural torus of 100k triangles) on a
 floor plane:
 
@@ -26,7 +27,6 @@ import platform
 import time
 from pathlib import Path
 
-import httpx
 import numpy as np
 import trimesh
 
@@ -35,6 +35,7 @@ from raycore import Scene
 from raycore.camera import perspective_rays
 from raycore.mesh import load_trimesh
 from raycore.render import render
+from service.client import Client
 from service.demo import torus
 from service.process import running_service
 
@@ -87,33 +88,9 @@ class TimedScene:
         return self._timed(self.scene.occluded, *args, **kwargs)
 
 
-def npy_header(array):
-    stream = io.BytesIO()
-    np.lib.format.write_array_header_1_0(stream, np.lib.format.header_data_from_array_1_0(array))
-    return stream.getvalue()
-
-
-def http_intersect(client, url, origins, directions):
-    """Encode, send, trace and decode one batch as a careful client does: the rays are copied
-    once, into an (N, 6) float32 array sent from its own memory, and the answer is read in
-    place.  Returns the answer's t."""
-    rays = np.empty((len(origins), 6), np.float32)
-    rays[:, :3], rays[:, 3:] = origins, directions
-    header = npy_header(rays)
-    response = client.post(f"{url}/intersect", content=iter([header, memoryview(rays).cast("B")]),
-                           headers={"content-type": "application/x-npy",
-                                    "accept": "application/x-npy",
-                                    "content-length": str(len(header) + rays.nbytes)})
-    response.raise_for_status()
-    answer = io.BytesIO(response.content)
-    np.lib.format.read_magic(answer)
-    _, _, dtype = np.lib.format.read_array_header_1_0(answer)
-    return np.frombuffer(response.content, dtype, offset=answer.tell())["t"], response
-
-
-def server_seconds(response):
-    """The service's own time for a request, from its Server-Timing header."""
-    return float(response.headers["server-timing"].split("dur=")[1]) / 1000
+def server_seconds(client):
+    """The service's own time for the client's last request, from its Server-Timing header."""
+    return float(client.last_headers["server-timing"].split("dur=")[1]) / 1000
 
 
 def stopwatch(function):
@@ -123,16 +100,15 @@ def stopwatch(function):
     return time.perf_counter() - start, result
 
 
-def bench_intersect(client, url, scene, rays, repeats):
+def bench_intersect(client, scene_id, scene, rays, repeats):
     origins, directions = (np.ascontiguousarray(a, dtype=np.float32) for a in rays)
     local = remote = server = np.inf
     for _ in range(repeats):  # interleaved, so that drifts in machine load hit both
         seconds, hits = stopwatch(lambda: scene.intersect(origins, directions))
         local = min(local, seconds)
-        seconds, (t, response) = stopwatch(
-            lambda: http_intersect(client, url, origins, directions))
-        remote, server = min(remote, seconds), min(server, server_seconds(response))
-    np.testing.assert_array_equal(t, hits.t)  # the same answers
+        seconds, table = stopwatch(lambda: client.intersect(scene_id, origins, directions))
+        remote, server = min(remote, seconds), min(server, server_seconds(client))
+    np.testing.assert_array_equal(table["t"], hits.t)  # the same answers
     count = len(origins)
     return {"rays": count, "hit_fraction": float(hits.hit.mean()),
             "in_process_s": local, "http_s": remote, "http_server_s": server,
@@ -140,7 +116,7 @@ def bench_intersect(client, url, scene, rays, repeats):
             "ratio": local / remote}
 
 
-def bench_render(client, url, scene, camera, repeats):
+def bench_render(client, scene_id, scene, camera, repeats):
     # as the service makes them, in the scene's precision
     rays = perspective_rays(camera["position"], camera["look_at"], camera["up"], camera["fov"],
                             RENDER_SIZE, RENDER_SIZE, scene.dtype)
@@ -150,13 +126,11 @@ def bench_render(client, url, scene, camera, repeats):
         seconds, image = stopwatch(lambda timed=timed: render(timed, *rays, RENDER_SIZE,
                                                               RENDER_SIZE))
         trace, full = min(trace, timed.seconds), min(full, seconds)
-        seconds, response = stopwatch(lambda: client.post(f"{url}/render", json={
-            "camera": camera, "shading": "lambert"}))
-        response.raise_for_status()
-        remote, server = min(remote, seconds), min(server, server_seconds(response))
+        seconds, png = stopwatch(lambda: client.render(scene_id, camera, "lambert"))
+        remote, server = min(remote, seconds), min(server, server_seconds(client))
     shadowed = float(np.mean(np.all(image == image.reshape(-1, 3).min(axis=0), axis=2)))
     return {"pixels": RENDER_SIZE**2, "in_process_trace_s": trace, "in_process_render_s": full,
-            "http_s": remote, "http_server_s": server, "png_bytes": len(response.content),
+            "http_s": remote, "http_server_s": server, "png_bytes": len(png),
             "darkest_pixel_fraction": shadowed, "ratio": remote / trace}
 
 
@@ -180,25 +154,22 @@ def main(argv=None):
         [0.3, 0.5, 1.0]) / np.linalg.norm([0.3, 0.5, 1.0])).tolist(), "look_at": center.tolist(),
         "up": [0.0, 1.0, 0.0], "fov": 45.0, "width": RENDER_SIZE, "height": RENDER_SIZE}
     # 1024x1024 camera rays make 1,048,576 rays: raise the default limit to fit them
-    with running_service({"RAYCORE_MAX_RAYS": str(2**21)}) as server, httpx.Client(
-            timeout=600) as client:
-        upload = client.post(f"{server}/v1/meshes?format=ply", content=data)
-        upload.raise_for_status()
-        created = client.post(f"{server}/v1/scenes", json={"dtype": "float32", "objects": [
-            {"type": "mesh", "mesh": upload.json()["id"]}, {"type": "plane", **floor}]})
-        created.raise_for_status()
-        url = f"{server}/v1/scenes/{created.json()['id']}"
+    with running_service({"RAYCORE_MAX_RAYS": str(2**21)}) as url, Client(
+            url, timeout=600) as client:
+        upload = client.upload_mesh(data, "ply")
+        scene_id = client.create_scene({"dtype": "float32", "objects": [
+            {"type": "mesh", "mesh": upload["id"]}, {"type": "plane", **floor}]})["id"]
         report = {
             "mesh": name, "triangles": int(len(mesh.faces)),
             "repeats": {"intersect": args.repeats, "render": 3 * args.repeats},
             "machine": {"python": platform.python_version(), "processor": platform.machine(),
                         "cpus": os.cpu_count(), "load_average_1min": os.getloadavg()[0]},
             "intersect": {
-                "camera": bench_intersect(client, url, scene,
+                "camera": bench_intersect(client, scene_id, scene,
                                           camera_rays(lo, hi, 1024, 1024), args.repeats),
-                "random": bench_intersect(client, url, scene, random_rays(lo, hi, 2**20),
+                "random": bench_intersect(client, scene_id, scene, random_rays(lo, hi, 2**20),
                                           args.repeats)},
-            "render": bench_render(client, url, scene, camera, 3 * args.repeats),
+            "render": bench_render(client, scene_id, scene, camera, 3 * args.repeats),
             "bars": BARS,
         }
     ratios = [report["intersect"][kind]["ratio"] for kind in ("camera", "random")]

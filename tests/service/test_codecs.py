@@ -1,6 +1,7 @@
 """Encoding at the edge: PNG, .npy answers, Accept headers."""
 
 import io
+import zlib
 
 import numpy as np
 import pytest
@@ -9,11 +10,20 @@ from PIL import Image
 from service import codecs
 
 
-@pytest.mark.parametrize("shape", [(1, 1, 3), (7, 5, 3), (64, 48, 3)])
+# the last two are deflated in two halves at once
+@pytest.mark.parametrize("shape", [(1, 1, 3), (7, 5, 3), (64, 48, 3), (150, 583, 3),
+                                   (512, 512, 3)])
 def test_png_decodes_to_the_image(shape):
     image = np.random.default_rng(0).integers(0, 256, shape, dtype=np.uint8)
-    decoded = np.asarray(Image.open(io.BytesIO(codecs.png(image))))
+    image[: shape[0] // 3] = 200  # compressible rows too
+    encoded = codecs.png(image)
+    decoded = np.asarray(Image.open(io.BytesIO(encoded)))
     np.testing.assert_array_equal(decoded, image)
+    # one IDAT chunk, whose zlib stream's checksum holds (Pillow does not check it)
+    start = encoded.index(b"IDAT")
+    length = int.from_bytes(encoded[start - 4:start], "big")
+    rows = zlib.decompress(encoded[start + 4:start + 4 + length])
+    assert len(rows) == shape[0] * (1 + 3 * shape[1])
 
 
 def test_npy_answer_is_a_structured_array_of_the_columns():
