@@ -38,16 +38,18 @@ def _pixel_grid(width, height):
     return x, y
 
 
-def _plane_points(center, right, up, across, rise, dtype, unit=False):
-    """(H*W, 3) points ``center + across[w] * right + rise[h] * up`` in scanline order, computed
-    in float64 and rounded once to ``dtype``; scaled to unit length when ``unit``."""
-    out = np.empty((len(rise) * len(across), 3), dtype)
-    _plane_points_kernel(center, right, up, across, rise, unit, out)
-    return out
+def _plane_rays(center, right, up, across, rise, constant, dtype, unit=False):
+    """Rays of an image plane, in scanline order, both (H*W, 3) of ``dtype``: the points
+    ``center + across[w] * right + rise[h] * up`` (computed in float64, rounded once, scaled to
+    unit length when ``unit``), and rows that all equal ``constant``, written in the same pass."""
+    points = np.empty((len(rise) * len(across), 3), dtype)
+    constants = np.empty_like(points)
+    _plane_rays_kernel(center, right, up, across, rise, unit, constant, points, constants)
+    return points, constants
 
 
 @njit(cache=True, parallel=True)
-def _plane_points_kernel(center, right, up, across, rise, unit, out):
+def _plane_rays_kernel(center, right, up, across, rise, unit, constant, points, constants):
     width = len(across)
     for h in prange(len(rise)):
         for w in range(width):
@@ -57,9 +59,12 @@ def _plane_points_kernel(center, right, up, across, rise, unit, out):
             if unit:
                 length = np.sqrt(x * x + y * y + z * z)
                 x, y, z = x / length, y / length, z / length
-            out[h * width + w, 0] = x
-            out[h * width + w, 1] = y
-            out[h * width + w, 2] = z
+            row = h * width + w
+            points[row, 0] = x
+            points[row, 1] = y
+            points[row, 2] = z
+            for k in range(3):
+                constants[row, k] = constant[k]
 
 
 def perspective_rays(position, look_at, up, fov, width, height, dtype="float64"):
@@ -93,9 +98,8 @@ def perspective_rays(position, look_at, up, fov, width, height, dtype="float64")
     across = x * np.tan(np.radians(fov) / 2) * width / height
     rise = y * np.tan(np.radians(fov) / 2)
     dtype = resolve_dtype(dtype)
-    directions = _plane_points(forward, right, true_up, across, rise, dtype, unit=True)
-    origins = np.empty_like(directions)
-    origins[:] = position
+    directions, origins = _plane_rays(forward, right, true_up, across, rise, position, dtype,
+                                      unit=True)
     return origins, directions
 
 
@@ -129,7 +133,4 @@ def orthographic_rays(position, look_at, up, view_height, width, height, dtype="
     across = x * view_height / 2 * width / height
     rise = y * view_height / 2
     dtype = resolve_dtype(dtype)
-    origins = _plane_points(position, right, true_up, across, rise, dtype)
-    directions = np.empty_like(origins)
-    directions[:] = forward
-    return origins, directions
+    return _plane_rays(position, right, true_up, across, rise, forward, dtype)

@@ -42,6 +42,23 @@ def _step_ulps(x, steps):
     return impl
 
 
+def offset_constants(dtype):
+    """(near, float_scale, int_scale) of :func:`offset_coordinate` for ``dtype``'s precision,
+    each of that type."""
+    return tuple(dtype(value) for value in _CONSTANTS[dtype])
+
+
+@njit(inline="always")
+def offset_coordinate(p, n, near, float_scale, int_scale):
+    """Coordinate ``p`` of a point moved off its surface along ``n``, that coordinate of the unit
+    normal turned to the side the new ray leaves on (constants from :func:`offset_constants`)."""
+    if abs(p) < near:
+        return p + float_scale * n
+    # a negative float grows in magnitude as its bit pattern grows: step the other way
+    steps = int(int_scale * n)
+    return step_ulps(p, -steps if p < 0 else steps)
+
+
 @njit(cache=True, parallel=True, error_model="numpy")
 def _offset(points, normals, directions, reach, near, float_scale, int_scale, out):
     for i in prange(len(points)):
@@ -50,13 +67,8 @@ def _offset(points, normals, directions, reach, near, float_scale, int_scale, ou
         side = like(near, -1.0) if facing < 0 else like(near, 1.0)
         for k in range(3):
             n = side * normals[i, k]
-            p = like(near, points[i, k] + reach[i] * n)
-            if abs(p) < near:
-                out[i, k] = p + float_scale * n
-            else:
-                # a negative float grows in magnitude as its bit pattern grows: step the other way
-                steps = int(int_scale * n)
-                out[i, k] = step_ulps(p, -steps if p < 0 else steps)
+            out[i, k] = offset_coordinate(like(near, points[i, k] + reach[i] * n), n, near,
+                                          float_scale, int_scale)
 
 
 def offset_ray_origin(points, normals, directions, *, error=None):
@@ -103,7 +115,6 @@ def offset_ray_origin(points, normals, directions, *, error=None):
                              f"({len(points)}, 3), got {error.shape}")
         # the error box's extent along the normal
         reach = error if error.ndim == 1 else np.sum(np.abs(normals) * error, axis=1)
-    near, float_scale, int_scale = (dtype(value) for value in _CONSTANTS[dtype])
     out = np.empty(shape, dtype)
-    _offset(points, normals, directions, reach, near, float_scale, int_scale, out)
+    _offset(points, normals, directions, reach, *offset_constants(dtype), out)
     return out

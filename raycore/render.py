@@ -8,7 +8,8 @@ lit hit), ``id`` (a colour per geometry id).  Misses get the background colour.
 import numpy as np
 from numba import njit, prange
 
-from raycore.offset import offset_ray_origin
+from raycore._fp import like
+from raycore.offset import offset_constants, offset_coordinate
 
 SHADINGS = ("depth", "normal", "lambert", "id")
 
@@ -70,25 +71,27 @@ def render(scene, origins, directions, width, height, shading="lambert", *,
     hits = scene.intersect(origins, directions, triangle_test=triangle_test, fields=fields)
     hit = hits.hit
     image = np.empty((len(hit), 3), np.uint8)
-    image[~hit] = np.asarray(background, np.uint8)
+    image[:] = np.asarray(background, np.uint8)
     if shading == "depth":
         image[hit] = _depth(hits.t[hit])[:, None]
     elif shading == "id":
         image[hit] = _id_colors(hits.geom_id[hit])
     elif shading == "normal":
-        facing, _, _, _ = _surface(scene, origins, directions, hits, np.zeros(3))
+        facing = np.empty_like(hits.normal)
+        _facing_normals(directions, hits.normal, facing)
         image[hit] = np.round((facing[hit] * 0.5 + 0.5) * 255)
     else:
-        facing, cosine, points, reach = _surface(scene, origins, directions, hits, light)
-        lit = cosine > 0
-        toward = np.empty_like(points)
-        toward[:] = light
-        shadow_origins = offset_ray_origin(points, facing, toward, error=reach)
-        # every ray gets a shadow ray, so nothing is gathered; the empty interval [0, -1] makes
-        # those of unlit pixels and misses cost nothing
-        lit &= ~scene.occluded(shadow_origins, toward, 0.0, np.where(lit, np.inf, -1.0),
-                               triangle_test=triangle_test)
-        _shade_lambert(colors, hits.geom_id, cosine, lit, float(ambient), image)
+        count = len(hit)
+        cosine = np.empty(count)
+        shadow_origins, shadow_directions = (np.empty((count, 3), scene.dtype) for _ in "od")
+        shadow_tmax = np.empty(count, scene.dtype)
+        error_eps = _POINT_ERROR_EPS * float(np.finfo(scene.dtype).eps)
+        _shadow_rays(origins, directions, hits.t, hits.normal, light, error_eps,
+                     *offset_constants(scene.dtype), cosine, shadow_origins,
+                     shadow_directions, shadow_tmax)
+        shadowed = scene.occluded(shadow_origins, shadow_directions, 0.0, shadow_tmax,
+                                  triangle_test=triangle_test)
+        _shade_lambert(colors, hits.geom_id, cosine, shadowed, float(ambient), image)
     return image.reshape(height, width, 3)
 
 
@@ -109,54 +112,71 @@ def _color_table(colors, count):
     return colors
 
 
-def _surface(scene, origins, directions, hits, light):
-    """Per ray: the normal facing the camera and the hit point (in the scene's precision, as
-    shadow rays need them), the normal's cosine to ``light`` and the point's error bound along
-    it (zeros where missed)."""
-    count = len(hits)
-    facing, cosine = np.empty((count, 3), scene.dtype), np.empty(count)
-    points, reach = np.empty((count, 3), scene.dtype), np.empty(count)
-    error_eps = _POINT_ERROR_EPS * float(np.finfo(scene.dtype).eps)
-    _surface_kernel(origins, directions, hits.t, hits.normal, light, error_eps, facing, cosine,
-                    points, reach)
-    return facing, cosine, points, reach
-
-
-@njit(cache=True, parallel=True, error_model="numpy")
-def _surface_kernel(origins, directions, t, normals, light, error_eps, facing, cosine, points,
-                    reach):
-    for i in prange(len(t)):
-        if not t[i] < np.inf:
-            facing[i] = 0.0
-            points[i] = 0.0
-            cosine[i] = 0.0
-            reach[i] = 0.0
-            continue
-        towards_ray = (normals[i, 0] * directions[i, 0] + normals[i, 1] * directions[i, 1]
-                       + normals[i, 2] * directions[i, 2])
-        side = -1.0 if towards_ray > 0 else 1.0
-        lit, bound = 0.0, 0.0
-        for k in range(3):
-            normal = side * normals[i, k]
-            step = t[i] * directions[i, k]
-            facing[i, k] = normal
-            points[i, k] = origins[i, k] + step
-            lit += normal * light[k]
-            bound += abs(normal) * error_eps * (abs(origins[i, k]) + abs(step))
-        cosine[i] = lit
-        reach[i] = bound
+@njit(inline="always")
+def _facing_side(normals, directions, i):
+    """+1 or -1: the sign that turns normal ``i`` to face where ray ``i`` came from."""
+    towards_ray = (normals[i, 0] * directions[i, 0] + normals[i, 1] * directions[i, 1]
+                   + normals[i, 2] * directions[i, 2])
+    return like(towards_ray, -1.0) if towards_ray > 0 else like(towards_ray, 1.0)
 
 
 @njit(cache=True, parallel=True)
-def _shade_lambert(colors, geom_id, cosine, lit, ambient, image):
+def _facing_normals(directions, normals, facing):
+    """Normals of hits turned to face the camera (NaN rows of misses stay NaN)."""
+    for i in prange(len(normals)):
+        side = _facing_side(normals, directions, i)
+        for k in range(3):
+            facing[i, k] = side * normals[i, k]
+
+
+@njit(cache=True, parallel=True, error_model="numpy")
+def _shadow_rays(origins, directions, t, normals, light, error_eps, near, float_scale,
+                 int_scale, cosine, shadow_origins, shadow_directions, shadow_tmax):
+    """Per camera ray, in one pass: the cosine of its hit's normal (facing the camera) to the
+    light, and its shadow ray towards the light.
+
+    The shadow ray starts at the hit point moved off the surface, to the lit side, first by the
+    point's error bound along the normal (the point ``origin + t * direction`` is off by a few
+    epsilons of ``|origin| + |t * direction|``), then as :func:`raycore.offset_ray_origin` does.
+    Its tmax is inf where the light reaches the front of the surface, and -1 where it does not
+    and for misses: an empty interval, so that those rays cost nothing and nothing is gathered.
+    """
+    for i in prange(len(t)):
+        for k in range(3):
+            shadow_directions[i, k] = light[k]
+        if not t[i] < np.inf:
+            cosine[i] = 0.0
+            shadow_origins[i] = 0.0
+            shadow_tmax[i] = -1.0
+            continue
+        side = _facing_side(normals, directions, i)
+        lit, reach = 0.0, 0.0
+        for k in range(3):
+            normal = side * normals[i, k]
+            lit += normal * light[k]
+            reach += abs(normal) * error_eps * (abs(origins[i, k]) + abs(t[i] * directions[i, k]))
+        cosine[i] = lit
+        shadow_tmax[i] = np.inf if lit > 0 else -1.0
+        for k in range(3):
+            normal = side * normals[i, k]
+            point = origins[i, k] + t[i] * directions[i, k]
+            shadow_origins[i, k] = offset_coordinate(like(near, point + reach * normal), normal,
+                                                     near, float_scale, int_scale)
+
+
+@njit(cache=True, parallel=True)
+def _shade_lambert(colors, geom_id, cosine, shadowed, ambient, image):
     """Colours of hits (misses are left alone): albedo * (ambient + direct light)."""
     for i in prange(len(geom_id)):
         if geom_id[i] < 0:
             continue
-        intensity = ambient + (1.0 - ambient) * (cosine[i] if lit[i] else 0.0)
+        lit = cosine[i] > 0 and not shadowed[i]
+        intensity = ambient + (1.0 - ambient) * (cosine[i] if lit else 0.0)
         for k in range(3):
             value = min(max(colors[geom_id[i], k] * intensity, 0.0), 1.0)
-            image[i, k] = np.uint8(np.floor(value * 255.0 + 0.5))
+            # rounded to nearest: value is not negative, so truncation is floor, and twice as
+            # fast as np.floor here
+            image[i, k] = np.uint8(int(value * 255.0 + 0.5))
 
 
 def _depth(t):
