@@ -240,9 +240,10 @@ class Client:
                 response = connection.getresponse()
                 body = _read_body(response)
                 break
-            except ConnectionError:  # reset, broken pipe, closed before the answer
+            except Exception as error:  # the connection's state is unknown: start afresh
                 connection.close()
-                if not reused or attempt:
+                # reset, broken pipe, closed before the answer
+                if not isinstance(error, ConnectionError) or not reused or attempt:
                     raise
         self.last_headers = response.headers
         if response.status >= 400:
