@@ -83,7 +83,8 @@ def render(scene, origins, directions, width, height, shading="lambert", *,
     else:
         count = len(hit)
         cosine = np.empty(count)
-        shadow_origins, shadow_directions = (np.empty((count, 3), scene.dtype) for _ in "od")
+        shadow_origins = np.empty((count, 3), scene.dtype)
+        shadow_directions = np.empty_like(shadow_origins)
         shadow_tmax = np.empty(count, scene.dtype)
         error_eps = _POINT_ERROR_EPS * float(np.finfo(scene.dtype).eps)
         _shadow_rays(origins, directions, hits.t, hits.normal, light, error_eps,
