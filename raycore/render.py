@@ -156,13 +156,13 @@ def _shadow_rays(origins, directions, t, normals, light, error_eps, near, float_
         shadow_tmax[i] = np.inf if lit > 0 else -1.0
         for k in range(3):
             shadow_directions[i, k] = light[k]
-            shadow_origins[i, k] = 0.0
-        if lit > 0:
-            for k in range(3):
+            if lit > 0:
                 normal = side * normals[i, k]
                 point = origins[i, k] + distance * directions[i, k]
                 shadow_origins[i, k] = offset_coordinate(like(near, point + reach * normal),
                                                          normal, near, float_scale, int_scale)
+            else:
+                shadow_origins[i, k] = 0.0
 
 
 @njit(cache=True, parallel=True)

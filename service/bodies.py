@@ -11,9 +11,10 @@ async def read_body(request: Request):
 
     With a Content-Length (which the app's BodyLimit has checked against the limit), the chunks
     that the server hands over are copied straight into one buffer of that size, where
-    Starlette's ``Request.body`` keeps them and joins them at the end: one copy fewer of a body of
-    tens of megabytes.  The buffer is left uninitialised, so that its pages are only committed as
-    the body fills them: a client that announces a large body and sends little holds little.
+    Starlette's ``Request.body`` would keep them in a list and join them at the end: one copy
+    fewer of a body of tens of megabytes.  The buffer is left uninitialised, so that its pages are
+    only committed as the body fills them: a client that announces a large body and sends little
+    holds little.
 
     Returns
     -------

@@ -114,10 +114,10 @@ class Client:
 
     def scene(self, scene_id):
         """The description of a stored scene (``demo`` names the built-in one)."""
-        return self._json("GET", f"/v1/scenes/{quote(scene_id, safe='')}")
+        return self._json("GET", _scene_path(scene_id))
 
     def delete_scene(self, scene_id):
-        self._request("DELETE", f"/v1/scenes/{quote(scene_id, safe='')}")
+        self._request("DELETE", _scene_path(scene_id))
 
     def intersect(self, scene_id, origins, directions, tmin=None, tmax=None, *,
                   query="closest", fields=(), triangle_test="watertight"):
@@ -174,8 +174,7 @@ class Client:
         else:
             parameters.update((name, value) for name, value in (("tmin", tmin), ("tmax", tmax))
                               if value is not None)
-        path = (f"/v1/scenes/{quote(scene_id, safe='')}/intersect?"
-                + urlencode(parameters, doseq=True))
+        path = _scene_path(scene_id) + "/intersect?" + urlencode(parameters, doseq=True)
         body = self._request("POST", path, (npy_header(precision, rays.shape), rays), NPY,
                              accept=NPY)
         shape, _, dtype, offset = parse_npy_header(body)
@@ -200,7 +199,7 @@ class Client:
             The PNG file.
         """
         body = _to_json({"camera": camera, "shading": shading, **options})
-        return bytes(self._request("POST", f"/v1/scenes/{quote(scene_id, safe='')}/render",
+        return bytes(self._request("POST", _scene_path(scene_id) + "/render",
                                    (body,), "application/json"))
 
     def _json(self, method, path, body=None, content_type=None):
@@ -253,6 +252,11 @@ class Client:
                 detail = body.tobytes().decode(errors="replace")
             raise ServiceError(response.status, detail)
         return body
+
+
+def _scene_path(scene_id):
+    """The path of a scene's resource; the id is quoted, as it is the client's to choose."""
+    return f"/v1/scenes/{quote(scene_id, safe='')}"
 
 
 def _read_body(response):
