@@ -678,7 +678,8 @@ def test_compose_workers(container, work):
     try:
         startup = server.wait_healthy()
         deadline = time.monotonic() + 180
-        while request(server.url, "GET", "/readyz")[0] != 200:  # the demo scene, per worker
+        # one worker's readiness: a request that the other takes while loading waits for its demo
+        while request(server.url, "GET", "/readyz")[0] != 200:
             if time.monotonic() > deadline:
                 raise TestFailed("/readyz did not answer 200 within 180 s")
             time.sleep(0.2)

@@ -98,12 +98,12 @@ async def _lifespan(app):
         # In the background, so that /healthz answers while kernels load, and in a compute slot,
         # so that no request's kernels run beside the demo's: Numba's workqueue threading layer
         # (the image's) aborts the process when two threads launch parallel loops at once.
-        demo = asyncio.create_task(state.compute(load_demo, state))
+        state.startup = asyncio.create_task(state.compute(load_demo, state))
     else:
         state.ready.set()
     yield
     if state.settings.demo:
-        await demo  # a worker thread cannot be stopped: shutting down waits for it
+        await state.startup  # a worker thread cannot be stopped: shutting down waits for it
 
 
 class ServerTiming:

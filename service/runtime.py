@@ -1,5 +1,6 @@
 """What the routes share: settings, the store, and the slots for geometry work."""
 
+import asyncio
 import threading
 from dataclasses import dataclass, field
 from functools import partial
@@ -16,13 +17,15 @@ from service.store import Store
 class Runtime:
     """Per-app state, created by :func:`service.app.create_app`.
 
-    ``limiter`` is made at startup, inside the event loop that it belongs to.
+    ``limiter`` and ``startup`` (the task that loads the demo scene, if any) are made at
+    startup, inside the event loop that they belong to.
     """
 
     settings: Settings
     store: Store
     ready: threading.Event = field(default_factory=threading.Event)
     limiter: anyio.CapacityLimiter | None = None
+    startup: asyncio.Task | None = None
 
     async def compute(self, function, *args):
         """Run CPU work in a worker thread, off the event loop, ``compute_slots`` at once.
@@ -33,9 +36,17 @@ class Runtime:
         """
         return await anyio.to_thread.run_sync(partial(function, *args), limiter=self.limiter)
 
-    def get(self, kind, key):
-        """A stored mesh or scene; NotFound when there is none under ``key``."""
+    async def get(self, kind, key):
+        """A stored mesh or scene; NotFound when there is none under ``key``.
+
+        A miss while startup work runs waits for it: the demo scene exists once it is done.
+        With several workers, a client that saw another worker answer /readyz cannot tell that
+        this one is still loading.
+        """
         entry = self.store.get(kind, key)
+        if entry is None and self.startup is not None and not self.startup.done():
+            await asyncio.shield(self.startup)  # a client that leaves must not cancel startup
+            entry = self.store.get(kind, key)
         if entry is None:
             raise _not_found(kind, key)
         return entry

@@ -79,7 +79,7 @@ async def upload_mesh(request: Request, response: Response,
 @router.get("/{mesh_id}", response_model=MeshInfo, summary="Describe an uploaded mesh",
             responses=error_responses(404, 422))
 async def get_mesh(mesh_id: str, state: Annotated[Runtime, Depends(runtime)]):
-    return state.get("mesh", mesh_id).info
+    return (await state.get("mesh", mesh_id)).info
 
 
 @router.delete("/{mesh_id}", status_code=204, summary="Forget an uploaded mesh",

@@ -63,7 +63,7 @@ async def create_scene(spec: SceneSpec, response: Response, state: State):
             description="`demo` names the built-in demo scene.",
             responses=error_responses(404, 422))
 async def get_scene(scene_id: str, state: State):
-    return state.get("scene", scene_id).info
+    return (await state.get("scene", scene_id)).info
 
 
 @router.delete("/{scene_id}", status_code=204, summary="Forget a scene",
@@ -87,7 +87,7 @@ async def delete_scene(scene_id: str, state: State):
     responses=error_responses(400, 404, 408, 413, 415, 422))
 async def intersect(scene_id: str, request: Request, state: State,
                     options: Annotated[NpyOptions, Query()]):
-    entry = state.get("scene", scene_id)
+    entry = await state.get("scene", scene_id)
     media_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
     if media_type not in ("application/json", codecs.NPY):
         raise UnsupportedMedia("Content-Type must be application/json or application/x-npy, "
@@ -155,7 +155,7 @@ def run_query(scene, rays, options):
         "image/png": {"schema": _BINARY, "example": "<PNG bytes>"}}},
         **error_responses(400, 404, 408, 413, 422)})
 async def render_scene(scene_id: str, spec: RenderRequest, state: State):
-    entry = state.get("scene", scene_id)
+    entry = await state.get("scene", scene_id)
     camera = spec.camera
     pixels, limit = camera.width * camera.height, state.settings.max_render_pixels
     if pixels > limit:

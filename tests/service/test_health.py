@@ -10,7 +10,7 @@ from fastapi.testclient import TestClient
 
 import service.app
 from service.app import create_app
-from service.demo import DEMO_CAMERA, demo_spec, torus
+from service.demo import DEMO_CAMERA, demo_spec, load_demo, torus
 
 from .data import SETTINGS, SPEC
 from .test_render_png import decode
@@ -65,6 +65,26 @@ def test_demo_loads_in_a_compute_slot(monkeypatch):
         assert client.post("/v1/scenes", json=SPEC).status_code == 201
         assert released_at and time.monotonic() > released_at[0]
         wait_ready(client)
+
+
+def test_a_request_for_the_demo_waits_while_it_loads(monkeypatch):
+    # With several workers, /readyz answered by one says nothing of the one that takes the next
+    # request: that one may still be loading the demo, and must not answer 404.
+    loading = threading.Event()
+
+    def slow_demo(state):
+        loading.set()
+        time.sleep(0.5)
+        load_demo(state)
+
+    monkeypatch.setattr(service.app, "load_demo", slow_demo)
+    with TestClient(create_app(replace(SETTINGS, demo=True))) as client:
+        assert loading.wait(10)
+        assert client.get("/readyz").status_code == 503
+        response = client.get("/v1/scenes/demo")
+        assert response.status_code == 200
+        assert response.json()["objects"] == len(demo_spec().objects)
+        assert client.get("/v1/scenes/unknown").status_code == 404
 
 
 def test_torus_is_closed_and_consistently_wound():
