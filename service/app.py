@@ -102,7 +102,7 @@ async def _lifespan(app):
     else:
         state.ready.set()
     yield
-    if state.settings.demo:
+    if state.startup is not None:
         await state.startup  # a worker thread cannot be stopped: shutting down waits for it
 
 
