@@ -1,10 +1,12 @@
 """Triangle meshes: validation, per-mesh BVH, and loading files through trimesh."""
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
 from raycore.bvh.layout import build_bvh
+from raycore.bvh.leaves import pack_leaves
 from raycore.rays import as_float_array
 
 
@@ -39,8 +41,9 @@ class Mesh:
                 f"faces must index vertices in [0, {len(self.vertices)}), "
                 f"got indices in [{faces.min()}, {faces.max()}]")
         self.faces = np.ascontiguousarray(faces, dtype=np.int64)
-        self.bvh = None
-        self.leaf_vertices = None
+        self.bvh = None  # its leaves reference leaf_blocks once built
+        self.leaf_blocks = None
+        self.slot_face = None
         self.build_seconds = 0.0
         self._built_for = None
 
@@ -66,15 +69,18 @@ class Mesh:
         # bound the triangles as the kernels will see them, after rounding to dtype
         corners = self.vertices.astype(dtype)[self.faces]  # (F, 3 vertices, 3)
         bounded = corners.astype(np.float64)
-        self.bvh = build_bvh(bounded.min(axis=1), bounded.max(axis=1), params)
-        self.leaf_vertices = np.ascontiguousarray(corners[self.bvh.order].reshape(-1, 9))
+        bvh = build_bvh(bounded.min(axis=1), bounded.max(axis=1), params)
+        self.leaf_blocks, self.slot_face = pack_leaves(bvh.nodes, bvh.refs, bvh.order,
+                                                       self.vertices, self.faces, dtype)
+        # slot_face replaces the leaf order, and the leaves now point at blocks
+        self.bvh = replace(bvh, order=None)
         self.build_seconds = time.perf_counter() - start
         self._built_for = (dtype, params)
 
     @property
     def nbytes(self):
-        """Bytes held for ray queries: the BVH and the triangles in leaf order."""
-        return self.bvh.nbytes + self.leaf_vertices.nbytes
+        """Bytes held for ray queries: the BVH, the leaf blocks and their face indices."""
+        return self.bvh.nbytes + self.leaf_blocks.nbytes + self.slot_face.nbytes
 
 
 def validate_transform(transform):

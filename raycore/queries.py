@@ -1,196 +1,233 @@
-"""Batch ray queries over a packed scene: compiled loops in parallel over rays.
+"""Batch ray queries over a packed scene: one compiled entry per call, serial or parallel.
 
-Each loop hands rays to :func:`raycore.bvh.traverse.trace_rays` in chunks, with the scratch
-(traversal stacks) of the thread that runs the chunk: nothing is allocated, nor
-reference-counted, per ray.
+Every query goes through :func:`trace`, which hands the rays to
+:func:`raycore.bvh.traverse.trace_range` with the scene's record: on the calling thread for
+small batches (no parallel region to start), or in chunks over the threads.  The compiled pass
+also checks the rays (finite, non-zero directions, bounds not NaN); Python checks only what
+NumPy tells cheaply (shapes, dtypes), so that a one-ray call costs a few microseconds.
+
+Scratch (traversal stacks, hit lists) is allocated once per calling thread and reused: several
+Python threads may query at once, and each call numbers its worker threads from 0.
 """
+
+import threading
 
 import numpy as np
 from numba import get_num_threads, get_thread_id, njit, parallel_chunksize, prange
 
-from raycore._fp import like, unit_roundoff
-from raycore.bvh.traverse import ALL, ANY, CLOSEST, MESH, new_scratch, trace_rays
+from raycore._fp import like
+from raycore.bvh.record import arrays_of
+from raycore.bvh.traverse import (
+    ALL,
+    ANY,
+    CLOSEST,
+    COUNT,
+    HIT_CAPACITY,
+    MESH,
+    new_scratch,
+    trace_range,
+)
 from raycore.primitives.analytic import analytic_surface
 from raycore.primitives.triangle import triangle_normal
 
 #: Rays per parallel work item: enough to amortise a call's set-up, few enough to balance cores.
 CHUNK = 1024
 
+#: Batches smaller than this are traced on the calling thread: starting a parallel region costs
+#: more than the rays it would share out.
+SERIAL_BELOW = 1024
+
 
 @njit(cache=True, parallel=True, _nrt=False)
-def _trace_parallel(mode, origins, directions, tmin, tmax, test, sphere_method,
-                    top_nodes, top_refs, top_order, direct,
-                    kind, param_row, mesh_of, xform_row, params, xforms,
-                    mesh_nodes, mesh_refs, tri_verts, node_base, tri_base,
-                    out_t, out_obj, out_prim, out_u, out_v, offsets, hits_t, hits_obj, hits_prim,
-                    int_scratch, real_scratch):
+def _trace_parallel(scene, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
+                    out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t,
+                    hits_obj, hits_prim, int_scratch, real_scratch, capacity, first_bad):
+    # first_bad[chunk]: the chunk's first refused ray (a reduction would allocate)
     n = len(origins)
-    for chunk in prange((n + CHUNK - 1) // CHUNK):
+    for chunk in prange(len(first_bad)):
         thread = get_thread_id()
-        trace_rays(mode, chunk * CHUNK, min(n, (chunk + 1) * CHUNK), origins, directions, tmin,
-                   tmax, test, sphere_method, top_nodes, top_refs, top_order, direct, kind,
-                   param_row, mesh_of, xform_row, params, xforms, mesh_nodes, mesh_refs,
-                   tri_verts, node_base, tri_base, out_t, out_obj, out_prim, out_u, out_v,
-                   offsets, hits_t, hits_obj, hits_prim, int_scratch[thread],
-                   real_scratch[thread])
+        first_bad[chunk] = trace_range(
+            scene, mode, test, sphere_method, origins, directions, tmin, tmax, chunk * CHUNK,
+            min(n, (chunk + 1) * CHUNK), out_t, out_obj, out_prim, out_hit, out_u, out_v,
+            out_slot, offsets, hits_t, hits_obj, hits_prim, int_scratch[thread],
+            real_scratch[thread], capacity)
 
 
-def _trace(mode, origins, directions, tmin, tmax, test, sphere_method, scene, outputs=None,
-           offsets=None, hits=None, barycentrics=False):
-    """Run :func:`trace_rays` over all rays in parallel; ``scene`` is the packed tuple of
-    arrays of ``Scene``.  Returns ``outputs``, allocated when not given, whose u and v are
-    empty unless ``barycentrics``."""
-    n = len(origins)
-    if outputs is None:
-        kept = n if barycentrics else 0
-        outputs = (np.empty(n, origins.dtype), np.empty(n, np.int64), np.empty(n, np.int64),
-                   np.empty(kept, origins.dtype), np.empty(kept, origins.dtype))
-    if hits is None:
-        hits = (np.empty(0, origins.dtype), np.empty(0, np.int64), np.empty(0, np.int64))
-        offsets = np.zeros(1, np.int64)
+@njit(cache=True)
+def _trace_in_parallel(record, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
+                       out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t,
+                       hits_obj, hits_prim, int_scratch, real_scratch, capacity):
+    first_bad = np.empty((len(origins) + CHUNK - 1) // CHUNK, np.int64)
+    _trace_parallel(arrays_of(record), mode, test, sphere_method, origins, directions, tmin,
+                    tmax, out_t, out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets,
+                    hits_t, hits_obj, hits_prim, int_scratch, real_scratch, capacity, first_bad)
+    return first_bad.min()
+
+
+@njit(cache=True)
+def _trace_here(record, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
+                out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t, hits_obj,
+                hits_prim, int_scratch, real_scratch, capacity):
+    return trace_range(arrays_of(record), mode, test, sphere_method, origins, directions, tmin,
+                       tmax, 0, len(origins), out_t, out_obj, out_prim, out_hit, out_u, out_v,
+                       out_slot, offsets, hits_t, hits_obj, hits_prim, int_scratch[0],
+                       real_scratch[0], capacity)
+
+
+class _Scratch(threading.local):
+    """Each calling thread's scratch rows, per precision and hit-list capacity."""
+
+    def __init__(self):
+        self.rows = {}
+
+    def get(self, dtype, capacity):
+        threads = get_num_threads()
+        key = (dtype, capacity)
+        rows = self.rows.get(key)
+        if rows is None or len(rows[0]) < threads:
+            rows = self.rows[key] = new_scratch(threads, dtype, capacity)
+        return rows
+
+
+_scratch = _Scratch()
+_EMPTY = {np.dtype(np.float32): np.empty(0, np.float32),
+          np.dtype(np.float64): np.empty(0, np.float64)}
+_NO_INTS = np.empty(0, np.int64)
+_NO_FLAGS = np.empty(0, np.uint8)
+_NO_OFFSETS = np.zeros(1, np.int64)
+
+
+def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, out_prim=None,
+          out_hit=None, barycentrics=None, offsets=_NO_OFFSETS, hits=None,
+          capacity=HIT_CAPACITY):
+    """Run one query over a batch; outputs not given are passed empty.
+
+    Parameters
+    ----------
+    scene : SceneRecord
+    mode, test, sphere_method : int
+    rays : tuple
+        ``(origins, directions, tmin, tmax)`` as :func:`raycore.rays.ray_arrays` gives them.
+    out_t, out_obj, out_prim, out_hit, barycentrics, offsets, hits
+        As :func:`raycore.bvh.traverse.trace_range`'s outputs (``barycentrics`` the
+        ``(u, v, slot)`` triple, ``hits`` the ``(t, obj, prim)`` buffers).
+
+    Returns
+    -------
+    int
+        The first refused ray, or N if none.
+    """
+    origins, directions, tmin, tmax = rays
+    empty = _EMPTY[origins.dtype]
+    out_t = empty if out_t is None else out_t
+    out_obj = _NO_INTS if out_obj is None else out_obj
+    out_prim = _NO_INTS if out_prim is None else out_prim
+    out_hit = _NO_FLAGS if out_hit is None else out_hit
+    u, v, slot = (empty, empty, _NO_INTS) if barycentrics is None else barycentrics
+    hits_t, hits_obj, hits_prim = (empty, _NO_INTS, _NO_INTS) if hits is None else hits
+    int_scratch, real_scratch = _scratch.get(origins.dtype, capacity)
+    arguments = (scene, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
+                 out_obj, out_prim, out_hit, u, v, slot, offsets, hits_t, hits_obj, hits_prim,
+                 int_scratch, real_scratch, capacity)
+    if len(origins) < SERIAL_BELOW:
+        return _trace_here(*arguments)
     # one chunk of CHUNK rays per scheduling step: rays cost very different amounts (a miss is
     # ten times cheaper than a hit), and static halves would leave one core idle
     with parallel_chunksize(1):
-        _trace_parallel(mode, origins, directions, tmin, tmax, test, sphere_method, *scene,
-                        *outputs, offsets, *hits, *new_scratch(get_num_threads(), origins.dtype))
-    return outputs
+        return _trace_in_parallel(*arguments)
 
 
-def closest_hits(origins, directions, tmin, tmax, test, sphere_method, scene, barycentrics):
+def closest_hits(scene, rays, test, sphere_method, barycentrics):
     """Closest hit of each ray.
 
     Returns
     -------
+    first_bad : int
+        The first refused ray, or N if none (then the other outputs are meaningless).
     t : ndarray, shape (N,)
         inf on a miss.
     obj, prim : ndarray of int64, shape (N,)
-        Object (geometry id) and leaf-order triangle or analytic surface part; -1 on a miss.
-    u, v : ndarray, shape (N,), or (0,) unless ``barycentrics``
-        Barycentrics of triangle hits.
+        Object (geometry id) and primitive id (face index; 0 for analytic shapes); -1 on a miss.
+    surface : tuple of ndarray, shape (N,), or None
+        ``(u, v, slot)``: barycentrics and slots of mesh hits (surface part of analytic ones),
+        when ``barycentrics``.
     """
-    return _trace(CLOSEST, origins, directions, tmin, tmax, test, sphere_method, scene,
-                  barycentrics=barycentrics)
+    n = len(rays[0])
+    dtype = rays[0].dtype
+    t = np.empty(n, dtype)
+    obj = np.empty(n, np.int64)
+    prim = np.empty(n, np.int64)
+    surface = (np.empty(n, dtype), np.empty(n, dtype), np.empty(n, np.int64)) \
+        if barycentrics else None
+    first_bad = trace(scene, CLOSEST, rays, test, sphere_method, out_t=t, out_obj=obj,
+                      out_prim=prim, barycentrics=surface)
+    return first_bad, t, obj, prim, surface
 
 
-def any_hits(origins, directions, tmin, tmax, test, sphere_method, scene):
-    """(N,) bool: whether each ray hits anything in [tmin, tmax], stopping at the first hit."""
-    return _trace(ANY, origins, directions, tmin, tmax, test, sphere_method, scene)[1] >= 0
+def any_hits(scene, rays, test, sphere_method):
+    """First refused ray (or N), and (N,) bool: whether each ray hits anything in [tmin, tmax],
+    stopping at the first hit."""
+    hit = np.empty(len(rays[0]), np.uint8)
+    first_bad = trace(scene, ANY, rays, test, sphere_method, out_hit=hit)
+    return first_bad, hit.view(np.bool_)
 
 
-@njit(cache=True, inline="always")
-def _share_vertex(tri_verts, p, q):
-    """Whether leaf-order triangles p and q share a vertex (exactly equal coordinates)."""
-    for a in range(3):
-        for b in range(3):
-            if (tri_verts[p, 3 * a] == tri_verts[q, 3 * b]
-                    and tri_verts[p, 3 * a + 1] == tri_verts[q, 3 * b + 1]
-                    and tri_verts[p, 3 * a + 2] == tri_verts[q, 3 * b + 2]):
-                return True
-    return False
+def crossing_counts(scene, rays, test, sphere_method):
+    """First refused ray (or N), the (N,) int64 crossings of each ray (a shared edge or vertex
+    crossed once counts once), and the hit-list capacity that held every ray's crossings."""
+    counts = np.empty(len(rays[0]), np.int64)
+    capacity = HIT_CAPACITY
+    while True:
+        first_bad = trace(scene, COUNT, rays, test, sphere_method, out_obj=counts,
+                          capacity=capacity)
+        most = -int(counts.min()) if len(counts) else 0
+        if first_bad < len(counts) or most <= capacity:
+            return first_bad, counts, capacity
+        # a ray crossed more surfaces than the list holds: again, with room for all of them
+        capacity = most
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
-def _sort_and_merge(offsets, hits_t, hits_obj, hits_prim, kind, tri_verts, counts):
-    """Sort each ray's hits by t and merge crossings of one surface reported twice.
-
-    A ray through a shared edge or vertex hits every triangle around it (that is what makes the
-    watertight test watertight); those hits are one crossing.  Two hits merge when they belong to
-    the same mesh object, their triangles share a vertex and their distances agree to within
-    √u relative (u the unit roundoff).  ``counts`` receives the merged counts; each ray's kept
-    hits are moved to the front of its range.
-    """
-    tol = np.sqrt(unit_roundoff(hits_t[0]))
-    for i in prange(len(offsets) - 1):
-        start = offsets[i]
-        stop = offsets[i + 1]
-        # insertion sort: a ray has few hits
-        for j in range(start + 1, stop):
-            t = hits_t[j]
-            obj = hits_obj[j]
-            prim = hits_prim[j]
-            k = j - 1
-            while k >= start and hits_t[k] > t:
-                hits_t[k + 1] = hits_t[k]
-                hits_obj[k + 1] = hits_obj[k]
-                hits_prim[k + 1] = hits_prim[k]
-                k -= 1
-            hits_t[k + 1] = t
-            hits_obj[k + 1] = obj
-            hits_prim[k + 1] = prim
-        kept = start
-        for j in range(start, stop):
-            duplicate = False
-            if kind[hits_obj[j]] == MESH:
-                k = kept - 1
-                while k >= start and hits_t[j] - hits_t[k] <= tol * abs(hits_t[j]):
-                    if hits_obj[k] == hits_obj[j] and _share_vertex(tri_verts, hits_prim[k],
-                                                                    hits_prim[j]):
-                        duplicate = True
-                        break
-                    k -= 1
-            if not duplicate:
-                hits_t[kept] = hits_t[j]
-                hits_obj[kept] = hits_obj[j]
-                hits_prim[kept] = hits_prim[j]
-                kept += 1
-        counts[i] = kept - start
-
-
-def all_hits(origins, directions, tmin, tmax, test, sphere_method, scene):
-    """Every hit of each ray, sorted by t, one per surface crossing.
+def all_hits(scene, rays, test, sphere_method):
+    """Every crossing of each ray, sorted by t, one per surface crossing.
 
     Returns
     -------
+    first_bad : int
     counts : ndarray of int64, shape (N,)
     t : ndarray, shape (H,)
     obj, prim : ndarray of int64, shape (H,)
-        Hits of ray i are at ``[offsets[i], offsets[i + 1])`` with offsets the cumulative counts;
-        ``prim`` as in :func:`closest_hits`.
+        Crossings of ray i are at ``[offsets[i], offsets[i + 1])`` with offsets the cumulative
+        counts; ``prim`` as in :func:`closest_hits`.
     """
-    n = len(origins)
-    # first pass counts, second pass fills exactly-sized buffers
-    outputs = _trace(ALL, origins, directions, tmin, tmax, test, sphere_method, scene)
-    counts = outputs[1]
-    offsets = np.zeros(n + 1, np.int64)
+    # the first pass counts, the second fills exactly-sized buffers
+    first_bad, counts, capacity = crossing_counts(scene, rays, test, sphere_method)
+    offsets = np.zeros(len(counts) + 1, np.int64)
+    if first_bad < len(counts):
+        return first_bad, counts, None, None, None
     np.cumsum(counts, out=offsets[1:])
     total = int(offsets[-1])
-    hits = (np.empty(total, origins.dtype), np.empty(total, np.int64), np.empty(total, np.int64))
+    hits = (np.empty(total, rays[0].dtype), np.empty(total, np.int64), np.empty(total, np.int64))
     if total:
-        _trace(ALL, origins, directions, tmin, tmax, test, sphere_method, scene, outputs,
-               offsets, hits)
-        kind = scene[4]
-        tri_verts = scene[12]
-        _sort_and_merge(offsets, *hits, kind, tri_verts, counts)
-    keep = np.repeat(offsets[:-1], counts) + _ranks_within(counts)
-    return counts, hits[0][keep], hits[1][keep], hits[2][keep]
-
-
-@njit(cache=True, parallel=True)
-def face_ids(obj, prim, kind, leaf_face):
-    """(N,) int64 primitive ids as users see them: the face index for a mesh hit (``prim`` is
-    a leaf-order triangle, ``leaf_face`` maps it back), 0 for an analytic shape, -1 for a miss."""
-    out = np.empty(len(obj), np.int64)
-    for i in prange(len(obj)):
-        if obj[i] < 0:
-            out[i] = -1
-        elif kind[obj[i]] == MESH:
-            out[i] = leaf_face[prim[i]]
-        else:
-            out[i] = 0
-    return out
-
-
-def _ranks_within(counts):
-    """(sum(counts),) int64: 0, 1, ..., counts[i] - 1 for each ray in turn."""
-    total = int(counts.sum())
-    starts = np.repeat(np.cumsum(counts) - counts, counts)
-    return np.arange(total, dtype=np.int64) - starts
+        trace(scene, ALL, rays, test, sphere_method, out_obj=np.empty_like(counts),
+              offsets=offsets, hits=hits, capacity=capacity)
+    return first_bad, counts, *hits
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def surface_fields(origins, directions, t, obj, prim, u, v, kind, param_row, xform_row, params,
-                   xforms, tri_verts, want_uv, want_normal, want_point):
+def surface_fields(scene, origins, directions, t, obj, slot, u, v, want_uv, want_normal,
+                   want_point):
     """Surface data of closest hits, computed after traversal and only for the asked fields.
+
+    Parameters
+    ----------
+    scene : SceneRecord
+    origins, directions : ndarray, shape (N, 3)
+    t : ndarray, shape (N,)
+    obj, slot : ndarray of int64, shape (N,)
+        Object hit (-1 on a miss), and the slot of a mesh hit or the surface part of an
+        analytic one.
+    u, v : ndarray, shape (N,)
+        Barycentrics of mesh hits.
 
     Returns
     -------
@@ -203,6 +240,7 @@ def surface_fields(origins, directions, t, obj, prim, u, v, kind, param_row, xfo
     uv = np.empty((n if want_uv else 0, 2), t.dtype)
     normal = np.empty((n if want_normal else 0, 3), t.dtype)
     point = np.empty((n if want_point else 0, 3), t.dtype)
+    blocks = scene.blocks
     for i in prange(n):
         o = origins[i]
         d = directions[i]
@@ -217,19 +255,20 @@ def surface_fields(origins, directions, t, obj, prim, u, v, kind, param_row, xfo
         if want_point:
             for a in range(3):
                 point[i, a] = o[a] + t[i] * d[a]
-        k = kind[obj[i]]
+        k = scene.kind[obj[i]]
         if k == MESH:
             if want_uv:
                 uv[i, 0] = u[i]
                 uv[i, 1] = v[i]
             if want_normal:
-                w = tri_verts[prim[i]]
+                s = slot[i]
+                w = blocks[s // 4, s % 4::4]
                 nx, ny, nz = triangle_normal(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7],
                                              w[8])
-                r = xform_row[obj[i]]
+                r = scene.xform_row[obj[i]]
                 if r >= 0:
                     # normals transform by the inverse transpose; xforms hold the inverse
-                    m = xforms[r]
+                    m = scene.xforms[r]
                     nx, ny, nz = (m[0] * nx + m[4] * ny + m[8] * nz,
                                   m[1] * nx + m[5] * ny + m[9] * nz,
                                   m[2] * nx + m[6] * ny + m[10] * nz)
@@ -239,8 +278,8 @@ def surface_fields(origins, directions, t, obj, prim, u, v, kind, param_row, xfo
                 normal[i, 1] = ny
                 normal[i, 2] = nz
             continue
-        nx, ny, nz, su, sv = analytic_surface(k, params[param_row[obj[i]]], o[0], o[1], o[2],
-                                              d[0], d[1], d[2], t[i], prim[i])
+        nx, ny, nz, su, sv = analytic_surface(k, scene.params[scene.param_row[obj[i]]], o[0],
+                                              o[1], o[2], d[0], d[1], d[2], t[i], slot[i])
         if want_uv:
             uv[i, 0] = su
             uv[i, 1] = sv

@@ -143,6 +143,77 @@ def _gather_rays(origins, directions):
     return out_origins, out_directions, status
 
 
+def _as_bound(value, name, count, dtype):
+    """A ray bound as a (1,) or (N,) array of ``dtype``, its shape checked; NaN is left for the
+    compiled pass to find.  Scalars come back as shared (1,) arrays."""
+    if isinstance(value, float | int) and not isinstance(value, bool):
+        key = (value, dtype)
+        array = _SCALAR_BOUNDS.get(key)
+        if array is None:
+            array = np.full(1, value, dtype)
+            if len(_SCALAR_BOUNDS) < 64:
+                _SCALAR_BOUNDS[key] = array
+        return array
+    try:
+        array = np.asarray(value, dtype=np.float64) if not isinstance(value, np.ndarray) \
+            or value.dtype.kind not in "biuf" else value
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{name} must be a number or an (N,) array of numbers") from error
+    if array.ndim == 0:
+        return np.full(1, array, dtype)
+    if array.shape != (count,):
+        raise ValueError(f"{name} must be a scalar or have shape ({count},), got {array.shape}")
+    return _converted(array, dtype)
+
+
+_SCALAR_BOUNDS = {}
+
+
+def ray_arrays(origins, directions, tmin, tmax, dtype):
+    """The arrays a query's compiled pass takes, with only the checks NumPy makes cheaply.
+
+    Arrays already C-contiguous in ``dtype`` are used as they are; bounds become (1,) arrays
+    when scalar (shared: kernels never write them).  What is wrong inside the arrays (NaN, inf,
+    zero directions, NaN bounds) is found by the compiled pass, which reports the first refused
+    ray; :func:`refuse` then says what is wrong with it.
+
+    Returns
+    -------
+    origins, directions : ndarray, shape (N, 3)
+    tmin, tmax : ndarray, shape (N,) or (1,)
+
+    Raises
+    ------
+    ValueError
+        Naming the argument whose shape or dtype is wrong.
+    """
+    if not (_ready(origins, dtype) and _ready(directions, dtype)
+            and origins.shape == directions.shape):
+        origins = _real_array(origins, "origins", (None, 3))
+        directions = _real_array(directions, "directions", (len(origins), 3))
+        if all(array.dtype == dtype and not array.flags.c_contiguous
+               for array in (origins, directions)):
+            origins, directions, _ = _gather_rays(origins, directions)
+        else:
+            origins = _converted(origins, dtype)
+            directions = _converted(directions, dtype)
+    count = len(origins)
+    return (origins, directions, _as_bound(tmin, "tmin", count, dtype),
+            _as_bound(tmax, "tmax", count, dtype))
+
+
+def _ready(array, dtype):
+    # an (N, 3) C-contiguous array of dtype, taken as it is
+    return (type(array) is np.ndarray and array.dtype == dtype and array.ndim == 2
+            and array.shape[1] == 3 and array.flags.c_contiguous)
+
+
+def refuse(origins, directions, tmin, tmax, dtype):
+    """Raise the ``ValueError`` that says what is wrong with a batch the compiled pass refused."""
+    prepare_rays(origins, directions, tmin, tmax, dtype)
+    raise AssertionError("the compiled pass refused a batch that prepare_rays accepts")
+
+
 def prepare_rays(origins, directions, tmin=0.0, tmax=np.inf, dtype=np.float64):
     """Validate a ray batch and return contiguous arrays in one precision.
 

@@ -5,6 +5,7 @@ BVH once, shared by all their instances; the top-level BVH is rebuilt over objec
 changes.  Analytic shapes stay analytic: a sphere is one object, not a tessellation.
 """
 
+import threading
 import time
 
 import numpy as np
@@ -12,12 +13,14 @@ import numpy as np
 from raycore import queries
 from raycore.bvh.build import BuildParams
 from raycore.bvh.layout import NODE_WIDTH, build_bvh
+from raycore.bvh.record import SceneRecord
+from raycore.bvh.simd import BLOCK
 from raycore.bvh.traverse import MESH
 from raycore.hits import SURFACE_FIELDS, AllHits, Hits
 from raycore.mesh import Mesh, validate_transform
 from raycore.primitives import analytic, box, cone, cylinder, disk, plane, sphere
 from raycore.primitives.triangle import triangle_test_code
-from raycore.rays import as_float_array, prepare_rays, resolve_dtype
+from raycore.rays import as_float_array, ray_arrays, refuse, resolve_dtype
 
 #: Shapes that enclose a volume, so that ``contains`` can count crossings of them.
 _CLOSED_KINDS = {analytic.SPHERE, analytic.BOX, analytic.TRANSFORMED_BOX, analytic.CYLINDER,
@@ -65,7 +68,8 @@ class Scene:
         self._params = []  # (20,) float64 rows of analytic shapes
         self._xforms = []  # (3, 4) float64 object-from-world matrices of instances
         self._placement = {}  # instance object -> (4x4 world-from-object matrix, world bounds)
-        self._packed = None
+        self._record = None  # SceneRecord of the built scene
+        self._build_lock = threading.Lock()
         self._top = None
         self.build_seconds = 0.0
 
@@ -91,7 +95,7 @@ class Scene:
         if xform is not None:
             self._xforms.append(xform)
         self._visible.append(visible)
-        self._packed = None
+        self._record = None
         return len(self._kind) - 1
 
     def add_mesh(self, vertices, faces, *, visible=True):
@@ -208,34 +212,33 @@ class Scene:
                    np.concatenate([visible[~finite], bounded]))
 
         dtype = self.dtype
-        params = np.array(self._params, dtype=dtype).reshape(-1, analytic.PARAM_WIDTH)
-        xforms = np.array(self._xforms, dtype=dtype).reshape(-1, 12)
-        objects = (np.array(self._kind, np.int64), np.array(self._param_row, np.int64),
-                   np.array(self._mesh_of, np.int64), np.array(self._xform_row, np.int64),
-                   params, xforms)
         empty_nodes = np.zeros((0, NODE_WIDTH), np.float32)
         mesh_nodes = np.concatenate([m.bvh.nodes for m in self._meshes] or [empty_nodes])
-        node_base = np.cumsum([0] + [len(m.bvh.nodes) for m in self._meshes])[:-1]
-        tri_base = np.cumsum([0] + [len(m.faces) for m in self._meshes])[:-1]
-        meshes = (
-            mesh_nodes,
-            mesh_nodes.view(np.int32),
-            np.concatenate([m.leaf_vertices for m in self._meshes] or [np.zeros((0, 9), dtype)]),
-            node_base.astype(np.int64),
-            tri_base.astype(np.int64),
+        blocks = [m.leaf_blocks for m in self._meshes]
+        self._record = SceneRecord(
+            *top,
+            np.array(self._kind, np.int64), np.array(self._param_row, np.int64),
+            np.array(self._mesh_of, np.int64), np.array(self._xform_row, np.int64),
+            np.array(self._params, dtype=dtype).reshape(-1, analytic.PARAM_WIDTH),
+            np.array(self._xforms, dtype=dtype).reshape(-1, 12),
+            mesh_nodes, mesh_nodes.view(np.int32),
+            np.concatenate(blocks or [np.zeros((0, BLOCK), dtype)]),
+            np.concatenate([m.slot_face for m in self._meshes] or [np.zeros(0, np.int32)]),
+            _starts([len(m.bvh.nodes) for m in self._meshes]), _starts([len(b) for b in blocks]),
         )
-        # leaf-order position -> face index, over all meshes
-        self._leaf_face = np.concatenate(
-            [m.bvh.order for m in self._meshes] or [np.zeros(0, np.int64)])
-        # one flat tuple of arrays, in the order of raycore.bvh.traverse.trace_rays's arguments
-        self._packed = top + objects + meshes
         self.build_seconds = time.perf_counter() - start
         return self
 
     def _scene(self):
-        if self._packed is None:
-            self.build()
-        return self._packed
+        """The built scene's record, built first if the scene changed (once, under a lock, when
+        several threads query a scene that is not built yet)."""
+        record = self._record
+        if record is None:
+            with self._build_lock:
+                if self._record is None:
+                    self.build()
+                record = self._record
+        return record
 
     @property
     def bounds(self):
@@ -268,11 +271,12 @@ class Scene:
     # ------------------------------------------------------------------ queries
 
     def _rays(self, origins, directions, tmin, tmax):
-        return prepare_rays(origins, directions, tmin, tmax, self.dtype)
+        return ray_arrays(origins, directions, tmin, tmax, self.dtype)
 
-    def _prim_ids(self, obj, prim):
-        """Map leaf-order triangles to face indices; analytic shapes have primitive 0."""
-        return queries.face_ids(obj, prim, self._scene()[4], self._leaf_face)
+    def _checked(self, first_bad, rays, given):
+        """Raise the error for the first ray the compiled pass refused, if it refused one."""
+        if first_bad < len(rays[0]):
+            refuse(*given, self.dtype)
 
     def intersect(self, origins, directions, tmin=0.0, tmax=np.inf, *,
                   triangle_test="watertight", sphere_method="precise", fields=()):
@@ -293,28 +297,31 @@ class Scene:
         Hits
         """
         fields = _check_fields(fields)
-        origins, directions, tmin, tmax = self._rays(origins, directions, tmin, tmax)
-        scene = self._scene()
-        t, obj, prim, u, v = queries.closest_hits(
-            origins, directions, tmin, tmax, triangle_test_code(triangle_test),
-            analytic.sphere_method_code(sphere_method), scene, barycentrics=bool(fields))
-        surface = {}
-        if fields:
-            kind, param_row, _, xform_row, params, xforms = scene[4:10]
-            uv, normal, point = queries.surface_fields(
-                origins, directions, t, obj, prim, u, v, kind, param_row, xform_row, params,
-                xforms, scene[12], "uv" in fields, "normal" in fields, "point" in fields)
-            surface = {name: value for name, value in
-                       (("uv", uv), ("normal", normal), ("point", point)) if name in fields}
-        return Hits(t=t, geom_id=obj, prim_id=self._prim_ids(obj, prim), **surface)
+        test = triangle_test_code(triangle_test)
+        method = analytic.sphere_method_code(sphere_method)
+        rays = self._rays(origins, directions, tmin, tmax)
+        first_bad, t, obj, prim, surface = queries.closest_hits(
+            self._scene(), rays, test, method, barycentrics=bool(fields))
+        self._checked(first_bad, rays, (origins, directions, tmin, tmax))
+        if not fields:
+            return Hits(t, obj, prim)
+        u, v, slot = surface
+        uv, normal, point = queries.surface_fields(
+            self._record, rays[0], rays[1], t, obj, slot, u, v, "uv" in fields,
+            "normal" in fields, "point" in fields)
+        surface = {name: value for name, value in
+                   (("uv", uv), ("normal", normal), ("point", point)) if name in fields}
+        return Hits(t=t, geom_id=obj, prim_id=prim, **surface)
 
     def occluded(self, origins, directions, tmin=0.0, tmax=np.inf, *,
                  triangle_test="watertight", sphere_method="precise"):
         """(N,) bool: whether anything lies on each ray within [tmin, tmax] (stops at the first)."""
-        origins, directions, tmin, tmax = self._rays(origins, directions, tmin, tmax)
-        return queries.any_hits(origins, directions, tmin, tmax,
-                                triangle_test_code(triangle_test),
-                                analytic.sphere_method_code(sphere_method), self._scene())
+        test = triangle_test_code(triangle_test)
+        method = analytic.sphere_method_code(sphere_method)
+        rays = self._rays(origins, directions, tmin, tmax)
+        first_bad, hit = queries.any_hits(self._scene(), rays, test, method)
+        self._checked(first_bad, rays, (origins, directions, tmin, tmax))
+        return hit
 
     def intersect_all(self, origins, directions, tmin=0.0, tmax=np.inf, *,
                       triangle_test="watertight", sphere_method="precise"):
@@ -327,19 +334,24 @@ class Scene:
         -------
         AllHits
         """
-        origins, directions, tmin, tmax = self._rays(origins, directions, tmin, tmax)
-        counts, t, obj, prim = queries.all_hits(
-            origins, directions, tmin, tmax, triangle_test_code(triangle_test),
-            analytic.sphere_method_code(sphere_method), self._scene())
-        ray_index = np.repeat(np.arange(len(origins), dtype=np.int64), counts)
-        return AllHits(ray_index=ray_index, t=t, geom_id=obj, prim_id=self._prim_ids(obj, prim),
-                       counts=counts)
+        test = triangle_test_code(triangle_test)
+        method = analytic.sphere_method_code(sphere_method)
+        rays = self._rays(origins, directions, tmin, tmax)
+        first_bad, counts, t, obj, prim = queries.all_hits(self._scene(), rays, test, method)
+        self._checked(first_bad, rays, (origins, directions, tmin, tmax))
+        ray_index = np.repeat(np.arange(len(counts), dtype=np.int64), counts)
+        return AllHits(ray_index=ray_index, t=t, geom_id=obj, prim_id=prim, counts=counts)
 
     def count(self, origins, directions, tmin=0.0, tmax=np.inf, *,
               triangle_test="watertight", sphere_method="precise"):
-        """(N,) int64: number of surface crossings along each ray (see :meth:`intersect_all`)."""
-        return self.intersect_all(origins, directions, tmin, tmax, triangle_test=triangle_test,
-                                  sphere_method=sphere_method).counts
+        """(N,) int64: number of surface crossings along each ray, counted as
+        :meth:`intersect_all` lists them, without listing them."""
+        test = triangle_test_code(triangle_test)
+        method = analytic.sphere_method_code(sphere_method)
+        rays = self._rays(origins, directions, tmin, tmax)
+        first_bad, counts, _ = queries.crossing_counts(self._scene(), rays, test, method)
+        self._checked(first_bad, rays, (origins, directions, tmin, tmax))
+        return counts
 
     def contains(self, points):
         """(M,) bool: whether each point lies inside a closed object of the scene.
@@ -399,6 +411,11 @@ class Scene:
         from raycore.mesh import load_trimesh
 
         return cls.from_trimesh(load_trimesh(path), dtype=dtype, **build)
+
+
+def _starts(sizes):
+    """(len(sizes),) int64: where each of consecutive runs of ``sizes`` starts."""
+    return np.cumsum([0, *sizes])[:-1].astype(np.int64)
 
 
 def _check_fields(fields):

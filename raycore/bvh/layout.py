@@ -36,8 +36,9 @@ class BVH:
         Wide rows (see the module docstring); row 0 holds the root's children.
     refs : ndarray of int32, shape (K, 64)
         The same memory viewed as int32, for the references and counts.
-    order : ndarray of int64, shape (F,)
-        Primitive indices in leaf order.
+    order : ndarray of int64, shape (F,), or None
+        Primitive indices in leaf order (None once a mesh's leaves are packed into blocks,
+        which then hold the face indices: :mod:`raycore.bvh.leaves`).
     lo, hi : ndarray of float64, shape (3,)
         Bounds of everything.
     depth, node_count, leaf_count : int
@@ -49,7 +50,7 @@ class BVH:
 
     nodes: np.ndarray
     refs: np.ndarray
-    order: np.ndarray
+    order: np.ndarray | None
     lo: np.ndarray
     hi: np.ndarray
     depth: int
@@ -59,7 +60,7 @@ class BVH:
 
     @property
     def nbytes(self):
-        return self.nodes.nbytes + self.order.nbytes
+        return self.nodes.nbytes + (0 if self.order is None else self.order.nbytes)
 
 
 def round_outwards(lo, hi):

@@ -84,3 +84,128 @@ def lowest_set_bit(typingctx, mask):
         return builder.cttz(args[0], ir.Constant(ir.IntType(1), 1))
 
     return sig, codegen
+
+
+#: Triangles per leaf block, and the values a block holds: the nine vertex coordinates, each
+#: stored for the four triangles side by side (a.x[4], a.y[4], a.z[4], b.x[4], ..., c.z[4]).
+LANES = 4
+BLOCK = 9 * LANES
+
+
+@intrinsic
+def watertight4(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin, tmax, out):
+    """The watertight test (``raycore.primitives.triangle.watertight``) against the four
+    triangles of a leaf block at once, without branches.
+
+    Every lane repeats the scalar test's operations in the same order (no contraction into
+    fused multiply-adds), so a lane's ``t``, ``u``, ``v`` equal the scalar test's bit for bit.
+    Lanes holding NaN (padding, degenerate triangles) fail every comparison and never hit.
+
+    Parameters
+    ----------
+    blocks : ndarray, shape (B, BLOCK)
+        Leaf blocks in the rays' precision.
+    block : int
+        Row of ``blocks``.
+    ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin, tmax
+        The ray and its ``watertight_setup`` values.
+    out : ndarray, shape (>= 3 * LANES,)
+        Receives t, u and v of the four lanes (``out[0:4]``, ``out[4:8]``, ``out[8:12]``),
+        meaningful where the lane's hit bit is set.
+
+    Returns
+    -------
+    int64
+        Bits 0-3: lanes hit.  Bits 4-7: lanes where an edge function rounded to 0, whose sign
+        must be settled exactly by the scalar test (they are not in bits 0-3).
+    """
+    sig = types.int64(blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin, tmax, out)
+
+    def codegen(context, builder, signature, args):
+        blocks_v, block_v, ox_v, oy_v, oz_v, kx_v, ky_v, kz_v, sx_v, sy_v, sz_v, lo_v, hi_v, \
+            out_v = args
+        scalar = context.get_value_type(signature.args[2])
+        vector = ir.VectorType(scalar, LANES)
+        table = context.make_array(signature.args[0])(context, builder, blocks_v)
+        start = cgutils.get_item_pointer(context, builder, signature.args[0], table,
+                                         [block_v, ir.Constant(ir.IntType(64), 0)])
+        first = builder.bitcast(start, vector.as_pointer())
+        planes = [builder.load(builder.gep(first, [ir.Constant(ir.IntType(64), k)]), align=1)
+                  for k in range(9)]
+
+        def splat(value):
+            one = builder.insert_element(ir.Constant(vector, ir.Undefined), value,
+                                         ir.Constant(ir.IntType(32), 0))
+            return builder.shuffle_vector(one, ir.Constant(vector, ir.Undefined),
+                                          ir.Constant(ir.VectorType(ir.IntType(32), LANES),
+                                                      [0] * LANES))
+
+        def pick(k, x, y, z):
+            # component k (a per-ray axis, 0..2) of the vector triple (x, y, z)
+            is0 = builder.icmp_signed("==", k, ir.Constant(k.type, 0))
+            is1 = builder.icmp_signed("==", k, ir.Constant(k.type, 1))
+            return builder.select(is0, x, builder.select(is1, y, z))
+
+        origin = [splat(ox_v), splat(oy_v), splat(oz_v)]
+        shear_x, shear_y, scale = splat(sx_v), splat(sy_v), splat(sz_v)
+        sheared = []
+        for vertex in range(3):
+            # translate by the origin, permute so that kz is forward, shear onto +z
+            rel = [builder.fsub(planes[3 * vertex + a], origin[a]) for a in range(3)]
+            along = pick(kz_v, *rel)
+            px = builder.fsub(pick(kx_v, *rel), builder.fmul(shear_x, along))
+            py = builder.fsub(pick(ky_v, *rel), builder.fmul(shear_y, along))
+            sheared.append((px, py, along))
+        (a_x, a_y, a_z), (b_x, b_y, b_z), (c_x, c_y, c_z) = sheared
+
+        def edge(px, py, qx, qy):
+            return builder.fsub(builder.fmul(qx, py), builder.fmul(qy, px))
+
+        u_a = edge(b_x, b_y, c_x, c_y)
+        v_b = edge(c_x, c_y, a_x, a_y)
+        w_c = edge(a_x, a_y, b_x, b_y)
+        zero = ir.Constant(vector, [0.0] * LANES)
+
+        def all3(op, x, y, z):
+            return builder.and_(builder.and_(builder.fcmp_ordered(op, x, zero),
+                                             builder.fcmp_ordered(op, y, zero)),
+                                builder.fcmp_ordered(op, z, zero))
+
+        exact = builder.or_(builder.or_(builder.fcmp_ordered("==", u_a, zero),
+                                        builder.fcmp_ordered("==", v_b, zero)),
+                            builder.fcmp_ordered("==", w_c, zero))
+        inside = builder.or_(all3(">=", u_a, v_b, w_c), all3("<=", u_a, v_b, w_c))
+        det = builder.fadd(builder.fadd(u_a, v_b), w_c)
+        t_det = builder.fadd(
+            builder.fadd(builder.fmul(u_a, builder.fmul(scale, a_z)),
+                         builder.fmul(v_b, builder.fmul(scale, b_z))),
+            builder.fmul(w_c, builder.fmul(scale, c_z)))
+        # make det positive (the paper's sign-mask xor)
+        flip = builder.fcmp_ordered("<", det, zero)
+
+        def positive(x):
+            return builder.select(flip, builder.fneg(x), x)
+
+        det, t_det, v_b, w_c = positive(det), positive(t_det), positive(v_b), positive(w_c)
+        lo, hi = splat(lo_v), splat(hi_v)
+        in_range = builder.and_(builder.fcmp_ordered(">=", t_det, builder.fmul(lo, det)),
+                                builder.fcmp_ordered("<=", t_det, builder.fmul(hi, det)))
+        t = builder.fdiv(t_det, det)
+        # det != 0, and t is not NaN (inf / inf when the edge functions overflow)
+        valid = builder.and_(builder.fcmp_ordered("!=", det, zero),
+                             builder.fcmp_ordered("==", t, t))
+        hit = builder.and_(builder.and_(inside, in_range), valid)
+        hit = builder.and_(hit, builder.not_(exact))
+        # t/det can round one ulp past a bound that the product test accepted: clamp into range
+        t = builder.select(builder.fcmp_ordered("<", t, lo), lo, t)
+        t = builder.select(builder.fcmp_ordered(">", t, hi), hi, t)
+        result = context.make_array(signature.args[13])(context, builder, out_v)
+        store = builder.bitcast(result.data, vector.as_pointer())
+        for k, value in enumerate((t, builder.fdiv(v_b, det), builder.fdiv(w_c, det))):
+            builder.store(value, builder.gep(store, [ir.Constant(ir.IntType(64), k)]), align=1)
+        bits = ir.IntType(LANES)
+        hit_bits = builder.zext(builder.bitcast(hit, bits), ir.IntType(64))
+        exact_bits = builder.zext(builder.bitcast(exact, bits), ir.IntType(64))
+        return builder.or_(hit_bits, builder.shl(exact_bits, ir.Constant(ir.IntType(64), LANES)))
+
+    return sig, codegen

@@ -1,16 +1,17 @@
-"""Compiled two-level traversal: closest hit, any hit, and every hit along a ray.
+"""Compiled two-level traversal: closest hit, any hit, crossing counts and every crossing.
 
 One routine serves every query (``mode``): the top-level BVH over objects (analytic shapes and
-mesh instances) and, inside an instance, the mesh's own BVH in object space.  It traces a range of
-rays with the scratch (traversal stacks) of the thread that runs it, allocated once per batch.
+mesh instances) and, inside a mesh, the mesh's own BVH in object space, whose leaves are blocks
+of four triangles tested at once (:mod:`raycore.bvh.leaves`, :func:`~raycore.bvh.simd.
+watertight4`).  :func:`trace_range` traces a range of rays with the scratch (traversal stacks,
+hit lists) of the thread that runs it; the caller owns the scratch (:func:`new_scratch`) and
+keeps it between calls.
 
-``trace_rays`` is compiled without Numba's reference counting (``_nrt=False``): every array it
-touches is borrowed from its caller, which also allocates its scratch (:func:`new_scratch`).
-With reference counts, each inlined helper's array arguments cost an atomic update on entry and
-exit, about 22 per ray, on counters that both threads share: a ray that missed the mesh took 51
-thread-ns instead of 15, and a camera batch 20 % longer.  The helpers that take arrays are
-inlined by Numba (``inline="always"``), those that take scalars only by LLVM (``forceinline``),
-which compiles them once.
+The kernels are compiled without Numba's reference counting (``_nrt=False``): every array they
+touch is borrowed from the caller.  With reference counts, each helper's array arguments cost
+an atomic update on entry and exit on counters that both threads share: a ray that missed the
+mesh took 51 thread-ns instead of 15.  Helpers that loop are ordinary compiled calls, compiled
+once; only the small ones are inlined.
 
 Robustness (DESIGN.md, "Numerics"): a watertight triangle test behind a plain slab test still
 leaks, so the box test is conservative (Ize 2013: the far distance is scaled by 1 + 2γ(n)) and
@@ -20,14 +21,14 @@ NaN-safe (a 0·inf slab distance, from a ray lying in a face plane, never narrow
 import numpy as np
 from numba import njit
 
-from raycore._fp import gamma, like
+from raycore._fp import gamma, like, unit_roundoff
 from raycore.bvh.build import MAX_DEPTH
 from raycore.bvh.layout import COUNTS, REFS, WIDTH
-from raycore.bvh.simd import enter8, lowest_set_bit
+from raycore.bvh.simd import LANES, enter8, lowest_set_bit, watertight4
 from raycore.primitives.analytic import analytic_hit
-from raycore.primitives.triangle import triangle_hit, watertight_setup
+from raycore.primitives.triangle import WATERTIGHT, triangle_hit, watertight_setup
 
-CLOSEST, ANY, ALL = 0, 1, 2
+CLOSEST, ANY, COUNT, ALL = 0, 1, 2, 3
 
 #: Object kind of a mesh instance; analytic kinds are the codes of ``raycore.primitives.analytic``.
 MESH = 16
@@ -37,6 +38,51 @@ MAX_ANALYTIC_HITS = 2
 
 #: A wide node pushes at most WIDTH - 1 children, at most once per level.
 STACK_SIZE = (WIDTH - 1) * MAX_DEPTH + 2
+
+#: Crossings one ray may record in its thread's scratch before the query is re-run with more
+#: room (COUNT and ALL modes); a ray through a closed mesh rarely crosses it more than a few times.
+HIT_CAPACITY = 64
+
+#: Scratch elements per thread besides the hit list: leaf lists and two stacks (integers); entry
+#: distances, the four lanes' t, u, v, and the stacks' distances (reals).
+INT_FIXED = 4 * WIDTH + 2 * STACK_SIZE
+REAL_FIXED = WIDTH + 3 * LANES + 2 * STACK_SIZE
+
+#: Bytes of a cache line, and the least left unused after each thread's row: two threads' scratch
+#: never share a line (that false sharing made a ray that misses the mesh three times slower),
+#: and each row starts on a line, so that vector stores never straddle two.
+LINE = 64
+SCRATCH_GAP = 2 * LINE
+
+
+def new_scratch(threads, dtype, capacity=HIT_CAPACITY):
+    """Scratch memory for :func:`trace_range`: one row per thread, in the rays' precision.
+
+    Parameters
+    ----------
+    threads : int
+    dtype : numpy float type
+    capacity : int
+        Crossings a ray may record (COUNT and ALL modes).
+
+    Returns
+    -------
+    int_scratch : ndarray of int64, shape (threads, >= INT_FIXED + 2 * capacity)
+    real_scratch : ndarray of dtype, shape (threads, >= REAL_FIXED + capacity)
+        Rows start on cache lines.
+    """
+    return (_line_rows(threads, INT_FIXED + 2 * capacity, np.int64),
+            _line_rows(threads, REAL_FIXED + capacity, dtype))
+
+
+def _line_rows(threads, count, dtype):
+    """Uninitialised (threads, >= count) array whose rows start on cache lines, SCRATCH_GAP
+    bytes or more apart."""
+    item = np.dtype(dtype).itemsize
+    stride = -(-(count * item + SCRATCH_GAP) // LINE) * LINE // item
+    memory = np.empty(threads * stride + LINE // item, dtype)
+    start = -memory.ctypes.data % LINE // item
+    return memory[start:start + threads * stride].reshape(threads, stride)
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
@@ -107,35 +153,51 @@ def _pop(stack, stack_t, top, tmax):
 
 
 @njit(cache=True, inline="always")
-def _record(hits_t, hits_obj, hits_prim, begin, end, found, t, obj, prim):
-    """ALL mode: store the ray's hit number ``found`` at ``begin + found`` if that is before
-    ``end``, and count it either way."""
-    if begin + found < end:
-        hits_t[begin + found] = t
-        hits_obj[begin + found] = obj
-        hits_prim[begin + found] = prim
+def _record(hit_t, hit_obj, hit_prim, found, t, obj, prim):
+    """COUNT and ALL modes: store crossing number ``found`` if the list has room, and count it
+    either way (a count beyond the list's length asks for a re-run with more room)."""
+    if found < len(hit_t):
+        hit_t[found] = t
+        hit_obj[found] = obj
+        hit_prim[found] = prim
     return found + 1
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _trace_mesh(mode, test, ray, slabs, tmin, tmax, nodes, refs, tri_verts, root, tri0, stack,
-                stack_t, entry, leaf_first, leaf_count, obj, hits_t, hits_obj, hits_prim, begin,
-                end, found):
-    """Traverse one mesh's BVH (rows from ``root``, triangles from ``tri0``) with an
-    object-space ray ``(ox, oy, oz, dx, dy, dz)`` and its ``_ray_setup`` values ``slabs``;
-    ``entry``, ``leaf_first``, ``leaf_count`` are (WIDTH,) scratch arrays.
+@njit(cache=True, inline="always")
+def _lane(blocks, slot, value):
+    """Value ``value`` (0..8: a.x, a.y, a.z, b.x, ..., c.z) of the triangle in ``slot``."""
+    return blocks[slot // LANES, value * LANES + slot % LANES]
 
-    Returns ``(t, prim, u, v, found)``: the closest hit below ``tmax`` (``prim`` is -1 if none;
-    in ANY mode the first found) and, in ALL mode, the running hit count.
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj, int_row,
+                real_row, hit_t, hit_obj, hit_prim, found):
+    """Traverse mesh ``mesh``'s BVH with an object-space ray.
+
+    Returns
+    -------
+    t, slot, u, v : the closest hit below ``tmax`` (``slot`` -1 if none; in ANY mode the first
+        found)
+    found : the running count of recorded crossings (COUNT and ALL modes)
     """
-    ox, oy, oz, dx, dy, dz = ray
-    ix, iy, iz, fx, fy, fz = slabs
+    nodes = scene.mesh_nodes
+    refs = scene.mesh_refs
+    blocks = scene.blocks
+    root = scene.node_base[mesh]
+    block0 = scene.block_base[mesh]
+    leaf_first = int_row[2 * WIDTH:3 * WIDTH]
+    leaf_count = int_row[3 * WIDTH:4 * WIDTH]
+    stack = int_row[4 * WIDTH + STACK_SIZE:INT_FIXED]
+    entry = real_row[:WIDTH]
+    lanes = real_row[WIDTH:WIDTH + 3 * LANES]
+    stack_t = real_row[WIDTH + 3 * LANES + STACK_SIZE:REAL_FIXED]
+    ix, iy, iz, fx, fy, fz = _ray_setup(ox, dx, dy, dz)
     # the watertight set-up waits for the first leaf: most rays that miss never reach one
     sheared = False
     kx = ky = kz = 0
     sx = sy = sz = like(ox, 0)
     best_t = tmax
-    best_prim = -1
+    best_slot = -1
     best_u = best_v = like(ox, 0)
     top = 0
     row = root
@@ -147,26 +209,51 @@ def _trace_mesh(mode, test, ray, slabs, tmin, tmax, nodes, refs, tri_verts, root
             kx, ky, kz, sx, sy, sz = watertight_setup(dx, dy, dz)
             sheared = True
         for leaf in range(leaves):
-            first = tri0 + leaf_first[leaf]
-            for p in range(first, first + leaf_count[leaf]):
-                t, u, w = triangle_hit(test, ox, oy, oz, dx, dy, dz, kx, ky, kz, sx, sy, sz,
-                                       tmin, best_t, tri_verts[p, 0], tri_verts[p, 1],
-                                       tri_verts[p, 2], tri_verts[p, 3], tri_verts[p, 4],
-                                       tri_verts[p, 5], tri_verts[p, 6], tri_verts[p, 7],
-                                       tri_verts[p, 8])
-                if t == np.inf:
-                    continue
-                if mode == ALL:
-                    found = _record(hits_t, hits_obj, hits_prim, begin, end, found, t, obj, p)
-                    continue
-                best_t, best_prim, best_u, best_v = t, p, u, w
-                if mode == ANY:
-                    return best_t, best_prim, best_u, best_v, found
+            first = block0 + leaf_first[leaf]
+            for block in range(first, first + (leaf_count[leaf] + LANES - 1) // LANES):
+                if test == WATERTIGHT:
+                    bits = watertight4(blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin,
+                                       best_t, lanes)
+                    exact = bits >> LANES
+                    hits = bits & (2**LANES - 1)
+                else:
+                    exact = 2**LANES - 1
+                    hits = 0
+                # lanes the vector test could not settle (or a test without one): scalar tests
+                while exact:
+                    lane = lowest_set_bit(exact)
+                    exact &= exact - 1
+                    slot = LANES * block + lane
+                    t, u, w = triangle_hit(
+                        test, ox, oy, oz, dx, dy, dz, kx, ky, kz, sx, sy, sz, tmin, best_t,
+                        _lane(blocks, slot, 0), _lane(blocks, slot, 1), _lane(blocks, slot, 2),
+                        _lane(blocks, slot, 3), _lane(blocks, slot, 4), _lane(blocks, slot, 5),
+                        _lane(blocks, slot, 6), _lane(blocks, slot, 7), _lane(blocks, slot, 8))
+                    if t < np.inf:
+                        lanes[lane] = t
+                        lanes[LANES + lane] = u
+                        lanes[2 * LANES + lane] = w
+                        hits |= 1 << lane
+                while hits:
+                    lane = lowest_set_bit(hits)
+                    hits &= hits - 1
+                    t = lanes[lane]
+                    if mode >= COUNT:
+                        found = _record(hit_t, hit_obj, hit_prim, found, t, obj,
+                                        LANES * block + lane)
+                        continue
+                    if t <= best_t:
+                        best_t = t
+                        best_slot = LANES * block + lane
+                        best_u = lanes[LANES + lane]
+                        best_v = lanes[2 * LANES + lane]
+                        if mode == ANY:
+                            return best_t, best_slot, best_u, best_v, found
         if next_row >= 0:
             row = next_row
         else:
             row, top = _pop(stack, stack_t, top, best_t)
-    return best_t, best_prim, best_u, best_v, found
+    return best_t, best_slot, best_u, best_v, found
 
 
 @njit(cache=True, inline="always")
@@ -179,188 +266,257 @@ def _transform(m, r, x, y, z, w):
     )
 
 
-#: Elements of each thread's scratch row: the leaf lists and two stacks (integers), or the entry
-#: distances and the stacks' distances (reals).
-INT_SCRATCH = 4 * WIDTH + 2 * STACK_SIZE
-REAL_SCRATCH = WIDTH + 2 * STACK_SIZE
-
-#: Bytes of a cache line, and the least left unused after each thread's row: two threads' scratch
-#: never share a line (that false sharing made a ray that misses the mesh three times slower),
-#: and each row starts on a line, so that the vector store of entry distances never straddles two.
-LINE = 64
-SCRATCH_GAP = 2 * LINE
-
-
-def new_scratch(threads, dtype):
-    """Scratch memory for :func:`trace_rays`: one row per thread, in the rays' precision.
-
-    Returns
-    -------
-    int_scratch : ndarray of int64, shape (threads, >= INT_SCRATCH)
-    real_scratch : ndarray of dtype, shape (threads, >= REAL_SCRATCH)
-        Rows start on cache lines.
-    """
-    return _line_rows(threads, INT_SCRATCH, np.int64), _line_rows(threads, REAL_SCRATCH, dtype)
-
-
-def _line_rows(threads, count, dtype):
-    """Uninitialised (threads, >= count) array whose rows start on cache lines, SCRATCH_GAP
-    bytes or more apart."""
-    item = np.dtype(dtype).itemsize
-    stride = -(-(count * item + SCRATCH_GAP) // LINE) * LINE // item
-    memory = np.empty(threads * stride + LINE // item, dtype)
-    start = -memory.ctypes.data % LINE // item
-    return memory[start:start + threads * stride].reshape(threads, stride)
-
-
 @njit(cache=True, error_model="numpy", _nrt=False)
-def trace_rays(mode, start, stop, origins, directions, tmin, tmax, test, sphere_method,
-               top_nodes, top_refs, top_order, direct,
-               kind, param_row, mesh_of, xform_row, params, xforms,
-               mesh_nodes, mesh_refs, tri_verts, node_base, tri_base,
-               out_t, out_obj, out_prim, out_u, out_v, offsets, hits_t, hits_obj, hits_prim,
-               int_scratch, real_scratch):
-    """Trace rays ``start .. stop - 1`` through a scene.
+def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tmax, int_row,
+              real_row, hit_t, hit_obj, hit_prim):
+    """Trace one ray through the scene.
 
     Parameters
     ----------
+    scene : SceneArrays
     mode : int
-        CLOSEST, ANY or ALL.
-    origins, directions : ndarray, shape (N, 3); tmin, tmax : ndarray, shape (N,)
-        The rays, in the scene's precision.
+        CLOSEST, ANY, COUNT or ALL.
     test, sphere_method : int
         Triangle test and sphere method codes.
-    top_nodes, top_refs, top_order, direct
-        Top-level BVH over bounded objects, and the objects tested directly, before it: the
-        unbounded ones (planes), and the only bounded one when there is just one.
-    kind, param_row, mesh_of, xform_row, params, xforms
-        Per-object kind, analytic parameter row, mesh, inverse-transform row (-1: identity);
-        the (P, 20) parameter table and the (T, 12) object-from-world matrices.
-    mesh_nodes, mesh_refs, tri_verts, node_base, tri_base
-        Every mesh's BVH rows and leaf-order triangles (T, 9), concatenated, with each mesh's
-        first row and first triangle.
-    out_t, out_obj, out_prim, out_u, out_v : ndarray, shape (N,)
-        CLOSEST and ANY: the hit's t (inf on a miss), object (-1 on a miss), primitive (leaf-order
-        triangle, or the analytic shape's surface part) and barycentrics (skipped when ``out_u``
-        is empty).  ALL: ``out_obj`` receives each ray's hit count.
-    offsets, hits_t, hits_obj, hits_prim : ndarray
-        ALL mode: ray i's hits go to ``[offsets[i], offsets[i + 1])`` of the hit buffers, which
-        may be empty to only count them.
-    int_scratch, real_scratch : ndarray, shape (>= INT_SCRATCH,) and (>= REAL_SCRATCH,)
-        Scratch: a row of each of :func:`new_scratch`'s arrays.
-    """
-    leaf_first = int_scratch[:WIDTH]
-    leaf_count = int_scratch[WIDTH:2 * WIDTH]
-    mesh_leaf_first = int_scratch[2 * WIDTH:3 * WIDTH]
-    mesh_leaf_count = int_scratch[3 * WIDTH:4 * WIDTH]
-    stack = int_scratch[4 * WIDTH:4 * WIDTH + STACK_SIZE]
-    mesh_stack = int_scratch[4 * WIDTH + STACK_SIZE:INT_SCRATCH]
-    entry = real_scratch[:WIDTH]
-    stack_t = real_scratch[WIDTH:WIDTH + STACK_SIZE]
-    mesh_stack_t = real_scratch[WIDTH + STACK_SIZE:REAL_SCRATCH]
-    has_top = len(top_nodes) > 0
-    store = len(hits_t) > 0
-    barycentrics = len(out_u) > 0
-    # A scene of one untransformed mesh, the common case, goes straight into the mesh's BVH:
-    # the general loop over objects costs about 15 % on coherent rays.
-    lone_mesh = (not has_top and len(direct) == 1 and kind[direct[0]] == MESH
-                 and xform_row[direct[0]] < 0)
-    lone_obj = direct[0] if lone_mesh else -1
-    lone_root = node_base[mesh_of[lone_obj]] if lone_mesh else 0
-    lone_tri0 = tri_base[mesh_of[lone_obj]] if lone_mesh else 0
-    for i in range(start, stop):
-        ox, oy, oz = origins[i, 0], origins[i, 1], origins[i, 2]
-        dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
-        t_lo = tmin[i]
-        slabs = _ray_setup(ox, dx, dy, dz)
-        ix, iy, iz, fx, fy, fz = slabs
-        begin = offsets[i] if store else 0
-        end = offsets[i + 1] if store else 0
+    ox, oy, oz, dx, dy, dz, tmin, tmax : float
+        The ray, in the scene's precision.
+    int_row, real_row : ndarray, shape (>= INT_FIXED,) and (>= REAL_FIXED,)
+        The thread's scratch.
+    hit_t, hit_obj, hit_prim : ndarray, shape (C,)
+        COUNT and ALL: the crossings found, unsorted (mesh crossings by slot, analytic ones by
+        surface part), as many as fit.
 
-        best_t = tmax[i]
-        best_obj = -1
-        best_prim = -1
-        best_u = best_v = like(ox, 0)
-        found = 0
-        done = False
-        if lone_mesh:
-            t, p, u, v, found = _trace_mesh(
-                mode, test, (ox, oy, oz, dx, dy, dz), slabs, t_lo, best_t, mesh_nodes, mesh_refs,
-                tri_verts, lone_root, lone_tri0, mesh_stack, mesh_stack_t, entry,
-                mesh_leaf_first, mesh_leaf_count, lone_obj, hits_t, hits_obj, hits_prim, begin,
-                end, found)
-            if p >= 0:
-                best_t, best_obj, best_prim, best_u, best_v = t, lone_obj, p, u, v
-        else:
-            # The direct objects live outside the top-level BVH; they are processed first, as a
-            # leaf of their own, so that they can shorten the ray before traversal.
-            in_top = False
-            leaf_first[0] = 0
-            leaf_count[0] = len(direct)
-            leaves = 1
-            next_row = 0 if has_top else -1
-            top = 0
-            while True:
-                for leaf in range(leaves):
-                    first = leaf_first[leaf]
-                    for slot in range(first, first + leaf_count[leaf]):
-                        if done:
-                            break
-                        obj = top_order[slot] if in_top else direct[slot]
-                        k = kind[obj]
-                        if k == MESH:
-                            r = xform_row[obj]
-                            if r < 0:
-                                mesh_ray = (ox, oy, oz, dx, dy, dz)
-                                mesh_slabs = slabs
-                            else:
-                                mox, moy, moz = _transform(xforms, r, ox, oy, oz, like(ox, 1))
-                                mdx, mdy, mdz = _transform(xforms, r, dx, dy, dz, like(ox, 0))
-                                mesh_ray = (mox, moy, moz, mdx, mdy, mdz)
-                                mesh_slabs = _ray_setup(mox, mdx, mdy, mdz)
-                            m = mesh_of[obj]
-                            t, p, u, v, found = _trace_mesh(
-                                mode, test, mesh_ray, mesh_slabs, t_lo, best_t, mesh_nodes,
-                                mesh_refs, tri_verts, node_base[m], tri_base[m], mesh_stack,
-                                mesh_stack_t, entry, mesh_leaf_first, mesh_leaf_count, obj, hits_t,
-                                hits_obj, hits_prim, begin, end, found)
-                            if p >= 0:
-                                best_t, best_obj, best_prim, best_u, best_v = t, obj, p, u, v
-                                done = mode == ANY
-                            continue
-                        t_from = t_lo
-                        for _ in range(MAX_ANALYTIC_HITS if mode == ALL else 1):
-                            t, part = analytic_hit(k, params[param_row[obj]], ox, oy, oz, dx, dy,
-                                                   dz, t_from, best_t, sphere_method)
-                            if t == np.inf:
-                                break
-                            if mode == ALL:
-                                found = _record(hits_t, hits_obj, hits_prim, begin, end, found, t,
-                                                obj, part)
-                                # the next root lies strictly beyond this one
-                                t_from = np.nextafter(t, like(t, np.inf))
-                                continue
-                            best_t, best_obj, best_prim = t, obj, part
-                            best_u = best_v = like(ox, 0)
-                            done = mode == ANY
-                if done:
-                    break
-                in_top = True
-                if next_row >= 0:
-                    row = next_row
-                else:
-                    row, top = _pop(stack, stack_t, top, best_t)
-                    if row < 0:
+    Returns
+    -------
+    t, obj, prim, u, v, found
+        CLOSEST and ANY: the hit (``obj`` -1 on a miss; ``prim`` a slot for meshes, the surface
+        part for analytic shapes) and its barycentrics.  COUNT and ALL: ``found`` crossings.
+    """
+    kind = scene.kind
+    direct = scene.direct
+    top_order = scene.top_order
+    top_nodes = scene.top_nodes
+    leaf_first = int_row[:WIDTH]
+    leaf_count = int_row[WIDTH:2 * WIDTH]
+    stack = int_row[4 * WIDTH:4 * WIDTH + STACK_SIZE]
+    entry = real_row[:WIDTH]
+    stack_t = real_row[WIDTH + 3 * LANES:WIDTH + 3 * LANES + STACK_SIZE]
+    ix, iy, iz, fx, fy, fz = _ray_setup(ox, dx, dy, dz)
+    best_t = tmax
+    best_obj = -1
+    best_prim = -1
+    best_u = best_v = like(ox, 0)
+    found = 0
+    # The direct objects live outside the top-level BVH; they are processed first, as a leaf of
+    # their own, so that they can shorten the ray before traversal.
+    in_top = False
+    leaf_first[0] = 0
+    leaf_count[0] = len(direct)
+    leaves = 1
+    next_row = 0 if len(top_nodes) > 0 else -1
+    top = 0
+    while True:
+        for leaf in range(leaves):
+            first = leaf_first[leaf]
+            for slot in range(first, first + leaf_count[leaf]):
+                obj = top_order[slot] if in_top else direct[slot]
+                k = kind[obj]
+                if k == MESH:
+                    r = scene.xform_row[obj]
+                    mox, moy, moz, mdx, mdy, mdz = ox, oy, oz, dx, dy, dz
+                    if r >= 0:
+                        mox, moy, moz = _transform(scene.xforms, r, ox, oy, oz, like(ox, 1))
+                        mdx, mdy, mdz = _transform(scene.xforms, r, dx, dy, dz, like(ox, 0))
+                    t, p, u, v, found = _trace_mesh(
+                        scene, mode, test, mox, moy, moz, mdx, mdy, mdz, tmin, best_t,
+                        scene.mesh_of[obj], obj, int_row, real_row, hit_t, hit_obj, hit_prim,
+                        found)
+                    if p >= 0:
+                        best_t, best_obj, best_prim, best_u, best_v = t, obj, p, u, v
+                        if mode == ANY:
+                            return best_t, best_obj, best_prim, best_u, best_v, found
+                    continue
+                t_from = tmin
+                for _ in range(MAX_ANALYTIC_HITS if mode >= COUNT else 1):
+                    t, part = analytic_hit(k, scene.params[scene.param_row[obj]], ox, oy, oz,
+                                           dx, dy, dz, t_from, best_t, sphere_method)
+                    if t == np.inf:
                         break
-                next_row, top, leaves = _descend(top_nodes, top_refs, row, 0, ox, oy, oz, ix, iy,
-                                                 iz, fx, fy, fz, t_lo, best_t, stack, stack_t,
-                                                 top, entry, leaf_first, leaf_count)
-        if mode == ALL:
-            out_obj[i] = found
+                    if mode >= COUNT:
+                        found = _record(hit_t, hit_obj, hit_prim, found, t, obj, part)
+                        # the next root lies strictly beyond this one
+                        t_from = np.nextafter(t, like(t, np.inf))
+                        continue
+                    best_t, best_obj, best_prim = t, obj, part
+                    best_u = best_v = like(ox, 0)
+                    if mode == ANY:
+                        return best_t, best_obj, best_prim, best_u, best_v, found
+        in_top = True
+        if next_row >= 0:
+            row = next_row
+        else:
+            row, top = _pop(stack, stack_t, top, best_t)
+            if row < 0:
+                break
+        next_row, top, leaves = _descend(top_nodes, scene.top_refs, row, 0, ox, oy, oz, ix, iy,
+                                         iz, fx, fy, fz, tmin, best_t, stack, stack_t, top, entry,
+                                         leaf_first, leaf_count)
+    return best_t, best_obj, best_prim, best_u, best_v, found
+
+
+@njit(cache=True, inline="always")
+def _share_vertex(blocks, p, q):
+    """Whether the triangles in slots p and q share a vertex (exactly equal coordinates)."""
+    for a in range(3):
+        for b in range(3):
+            if (_lane(blocks, p, 3 * a) == _lane(blocks, q, 3 * b)
+                    and _lane(blocks, p, 3 * a + 1) == _lane(blocks, q, 3 * b + 1)
+                    and _lane(blocks, p, 3 * a + 2) == _lane(blocks, q, 3 * b + 2)):
+                return True
+    return False
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def merge_crossings(scene, hit_t, hit_obj, hit_prim, count):
+    """Sort one ray's ``count`` crossings by t and merge those of one surface reported twice.
+
+    A ray through a shared edge or vertex hits every triangle around it (that is what makes the
+    watertight test watertight); those hits are one crossing.  Two hits merge when they belong
+    to the same mesh object, their triangles share a vertex and their distances agree to within
+    √u relative (u the unit roundoff).  The kept crossings are moved to the front.
+
+    Returns
+    -------
+    int
+        Crossings kept.
+    """
+    if count == 0:
+        return 0
+    tol = np.sqrt(unit_roundoff(hit_t[0]))
+    # insertion sort: a ray has few crossings
+    for j in range(1, count):
+        t = hit_t[j]
+        obj = hit_obj[j]
+        prim = hit_prim[j]
+        k = j - 1
+        while k >= 0 and hit_t[k] > t:
+            hit_t[k + 1] = hit_t[k]
+            hit_obj[k + 1] = hit_obj[k]
+            hit_prim[k + 1] = hit_prim[k]
+            k -= 1
+        hit_t[k + 1] = t
+        hit_obj[k + 1] = obj
+        hit_prim[k + 1] = prim
+    kept = 0
+    for j in range(count):
+        duplicate = False
+        if scene.kind[hit_obj[j]] == MESH:
+            k = kept - 1
+            while k >= 0 and hit_t[j] - hit_t[k] <= tol * abs(hit_t[j]):
+                if hit_obj[k] == hit_obj[j] and _share_vertex(scene.blocks, hit_prim[k],
+                                                              hit_prim[j]):
+                    duplicate = True
+                    break
+                k -= 1
+        if not duplicate:
+            hit_t[kept] = hit_t[j]
+            hit_obj[kept] = hit_obj[j]
+            hit_prim[kept] = hit_prim[j]
+            kept += 1
+    return kept
+
+
+@njit(cache=True, inline="always")
+def _face_id(scene, obj, prim):
+    """The primitive id users see: the face index for a mesh hit (``prim`` is a slot), the
+    surface part's row 0 for an analytic shape."""
+    if scene.kind[obj] == MESH:
+        return np.int64(scene.slot_face[prim])
+    return np.int64(0)
+
+
+@njit(cache=True, inline="always")
+def _bad_ray(origins, directions, tmin, tmax, i, step):
+    """Whether ray ``i`` is one the library refuses: a non-finite coordinate, a zero direction,
+    or a NaN bound (the caller finds out which and says so)."""
+    fine = True
+    nonzero = False
+    for a in range(3):
+        fine &= np.isfinite(origins[i, a]) and np.isfinite(directions[i, a])
+        nonzero |= directions[i, a] != 0
+    lo = tmin[i * step]
+    hi = tmax[i * step]
+    return not (fine and nonzero and lo == lo and hi == hi)
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tmax, start, stop,
+                out_t, out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t,
+                hits_obj, hits_prim, int_row, real_row, capacity):
+    """Trace rays ``start .. stop - 1``, checking each first.
+
+    Parameters
+    ----------
+    scene : SceneArrays
+    mode, test, sphere_method : int
+    origins, directions : ndarray, shape (N, 3)
+    tmin, tmax : ndarray, shape (N,) or (1,)
+        Per-ray bounds, or one for every ray.
+    start, stop : int
+    out_t, out_obj, out_prim : ndarray, shape (N,) or (0,)
+        CLOSEST: t (inf on a miss), object (-1 on a miss) and primitive id (face index, or 0 for
+        an analytic shape; -1 on a miss).  COUNT and ALL: ``out_obj`` receives each ray's
+        crossing count, or minus the crossings found when the hit list was too short for them.
+    out_hit : ndarray of uint8, shape (N,) or (0,)
+        ANY: 1 where the ray hits something.
+    out_u, out_v, out_slot : ndarray, shape (N,) or (0,)
+        CLOSEST, when not empty: barycentrics and the slot of mesh hits (surface fields).
+    offsets, hits_t, hits_obj, hits_prim : ndarray
+        ALL: ray i's crossings go to ``[offsets[i], offsets[i + 1])`` of the hit buffers.
+    int_row, real_row : ndarray
+        The thread's scratch row (:func:`new_scratch`).
+    capacity : int
+        Length of the hit list in the scratch row.
+
+    Returns
+    -------
+    int
+        The first refused ray, or N if none (refused rays are not traced).
+    """
+    n = len(origins)
+    step = 1 if len(tmin) == n else 0
+    hit_obj = int_row[INT_FIXED:INT_FIXED + capacity]
+    hit_prim = int_row[INT_FIXED + capacity:INT_FIXED + 2 * capacity]
+    hit_t = real_row[REAL_FIXED:REAL_FIXED + capacity]
+    barycentrics = len(out_u) > 0
+    first_bad = n
+    for i in range(start, stop):
+        if _bad_ray(origins, directions, tmin, tmax, i, step):
+            first_bad = min(first_bad, i)
             continue
-        out_t[i] = best_t if best_obj >= 0 else like(ox, np.inf)
-        out_obj[i] = best_obj
-        out_prim[i] = best_prim
-        if barycentrics:
-            out_u[i] = best_u
-            out_v[i] = best_v
+        t, obj, prim, u, v, found = trace_ray(
+            scene, mode, test, sphere_method, origins[i, 0], origins[i, 1], origins[i, 2],
+            directions[i, 0], directions[i, 1], directions[i, 2], tmin[i * step],
+            tmax[i * step], int_row, real_row, hit_t, hit_obj, hit_prim)
+        if mode == ANY:
+            out_hit[i] = obj >= 0
+        elif mode == CLOSEST:
+            out_t[i] = t if obj >= 0 else like(t, np.inf)
+            out_obj[i] = obj
+            out_prim[i] = _face_id(scene, obj, prim) if obj >= 0 else -1
+            if barycentrics:
+                out_u[i] = u
+                out_v[i] = v
+                out_slot[i] = prim
+        elif found > capacity:
+            out_obj[i] = -found
+        else:
+            kept = merge_crossings(scene, hit_t, hit_obj, hit_prim, found)
+            out_obj[i] = kept
+            if mode == ALL:
+                at = offsets[i]
+                for j in range(kept):
+                    hits_t[at + j] = hit_t[j]
+                    hits_obj[at + j] = hit_obj[j]
+                    hits_prim[at + j] = _face_id(scene, hit_obj[j], hit_prim[j])
+    return first_bad

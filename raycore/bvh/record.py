@@ -1,0 +1,54 @@
+"""The packed scene that every kernel reads: one record of arrays.
+
+A built :class:`raycore.Scene` hands its kernels one :class:`SceneRecord` (a Numba structref),
+not a list of loose arrays, so that a call from Python type-checks one argument for the whole
+scene.  A structref's fields live behind Numba's reference-counted memory, which the traversal
+(compiled without reference counts) cannot read: the entry points turn it into a
+:data:`SceneArrays` named tuple once per call (:func:`arrays_of`), and kernels read
+``scene.kind``, ``scene.blocks`` and so on from that.  The same record will serve the point
+queries (closest point, winding number): the wide nodes and the leaf blocks are all they need.
+"""
+
+from collections import namedtuple
+
+from numba import njit, types
+from numba.experimental import structref
+
+#: Fields in constructor order.
+FIELDS = (
+    # top-level BVH over bounded objects: wide rows (float32 and their int32 view), the object
+    # of each leaf slot, and the objects tested before it (unbounded ones, or a lone object)
+    "top_nodes", "top_refs", "top_order", "direct",
+    # per object: kind, analytic parameter row, mesh, inverse-transform row (-1: none); the
+    # (P, PARAM_WIDTH) parameter table and the (T, 12) object-from-world matrices
+    "kind", "param_row", "mesh_of", "xform_row", "params", "xforms",
+    # every mesh's wide rows and leaf blocks, concatenated, with each mesh's first row and first
+    # block, and the face index of every slot (raycore.bvh.leaves)
+    "mesh_nodes", "mesh_refs", "blocks", "slot_face", "node_base", "block_base",
+)
+
+
+@structref.register
+class SceneRecordType(types.StructRef):
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(kind)) for name, kind in fields)
+
+
+class SceneRecord(structref.StructRefProxy):
+    """The arrays of a built scene, as one argument for compiled code (fields: :data:`FIELDS`)."""
+
+
+structref.define_proxy(SceneRecord, SceneRecordType, list(FIELDS))
+
+#: The same arrays as a named tuple, passed by value between compiled functions.
+SceneArrays = namedtuple("SceneArrays", FIELDS)
+
+
+@njit(cache=True)
+def arrays_of(scene):
+    """The :data:`SceneArrays` of a :class:`SceneRecord` (inside compiled code)."""
+    return SceneArrays(
+        scene.top_nodes, scene.top_refs, scene.top_order, scene.direct,
+        scene.kind, scene.param_row, scene.mesh_of, scene.xform_row, scene.params, scene.xforms,
+        scene.mesh_nodes, scene.mesh_refs, scene.blocks, scene.slot_face, scene.node_base,
+        scene.block_base)
