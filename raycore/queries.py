@@ -80,9 +80,9 @@ class _Scratch(threading.local):
     def __init__(self):
         self.rows = {}
 
-    def get(self, dtype, capacity):
-        threads = get_num_threads()
-        key = (dtype, capacity)
+    def get(self, dtype, capacity, threads):
+        """Scratch with at least ``threads`` rows (:func:`raycore.bvh.traverse.new_scratch`)."""
+        key = (dtype.char, capacity)
         rows = self.rows.get(key)
         if rows is None or len(rows[0]) < threads:
             rows = self.rows[key] = new_scratch(threads, dtype, capacity)
@@ -125,11 +125,13 @@ def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, o
     out_hit = _NO_FLAGS if out_hit is None else out_hit
     u, v, slot = (empty, empty, _NO_INTS) if barycentrics is None else barycentrics
     hits_t, hits_obj, hits_prim = (empty, _NO_INTS, _NO_INTS) if hits is None else hits
-    int_scratch, real_scratch = _scratch.get(origins.dtype, capacity)
+    serial = len(origins) < SERIAL_BELOW
+    int_scratch, real_scratch = _scratch.get(origins.dtype, capacity,
+                                             1 if serial else get_num_threads())
     arguments = (scene, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
                  out_obj, out_prim, out_hit, u, v, slot, offsets, hits_t, hits_obj, hits_prim,
                  int_scratch, real_scratch, capacity)
-    if len(origins) < SERIAL_BELOW:
+    if serial:
         return _trace_here(*arguments)
     # one chunk of CHUNK rays per scheduling step: rays cost very different amounts (a miss is
     # ten times cheaper than a hit), and static halves would leave one core idle

@@ -146,8 +146,8 @@ def _gather_rays(origins, directions):
 def _as_bound(value, name, count, dtype):
     """A ray bound as a (1,) or (N,) array of ``dtype``, its shape checked; NaN is left for the
     compiled pass to find.  Scalars come back as shared (1,) arrays."""
-    if isinstance(value, float | int) and not isinstance(value, bool):
-        key = (value, dtype)
+    if type(value) in _PLAIN_NUMBERS:
+        key = (value, dtype.char)
         array = _SCALAR_BOUNDS.get(key)
         if array is None:
             array = np.full(1, value, dtype)
@@ -167,11 +167,13 @@ def _as_bound(value, name, count, dtype):
 
 
 _SCALAR_BOUNDS = {}
+_PLAIN_NUMBERS = (float, int)
 
 
 def ray_arrays(origins, directions, tmin, tmax, dtype):
     """The arrays a query's compiled pass takes, with only the checks NumPy makes cheaply.
 
+    ``dtype`` is a ``numpy.dtype`` (float32 or float64).
     Arrays already C-contiguous in ``dtype`` are used as they are; bounds become (1,) arrays
     when scalar (shared: kernels never write them).  What is wrong inside the arrays (NaN, inf,
     zero directions, NaN bounds) is found by the compiled pass, which reports the first refused
@@ -204,7 +206,7 @@ def ray_arrays(origins, directions, tmin, tmax, dtype):
 
 def _ready(array, dtype):
     # an (N, 3) C-contiguous array of dtype, taken as it is
-    return (type(array) is np.ndarray and array.dtype == dtype and array.ndim == 2
+    return (type(array) is np.ndarray and array.dtype is dtype and array.ndim == 2
             and array.shape[1] == 3 and array.flags.c_contiguous)
 
 

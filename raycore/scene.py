@@ -58,6 +58,7 @@ class Scene:
     def __init__(self, dtype="float32", *, bins=16, max_leaf_size=4, traversal_cost=1.0,
                  intersection_cost=1.0):
         self.dtype = resolve_dtype(dtype)
+        self._kernel_dtype = np.dtype(self.dtype)
         self.build_params = BuildParams(bins, max_leaf_size, traversal_cost, intersection_cost)
         self._meshes = []  # Mesh, each with its BVH built lazily
         self._kind = []  # per object
@@ -271,7 +272,7 @@ class Scene:
     # ------------------------------------------------------------------ queries
 
     def _rays(self, origins, directions, tmin, tmax):
-        return ray_arrays(origins, directions, tmin, tmax, self.dtype)
+        return ray_arrays(origins, directions, tmin, tmax, self._kernel_dtype)
 
     def _checked(self, first_bad, rays, given):
         """Raise the error for the first ray the compiled pass refused, if it refused one."""
@@ -296,7 +297,7 @@ class Scene:
         -------
         Hits
         """
-        fields = _check_fields(fields)
+        fields = _check_fields(fields) if fields else ()
         test = triangle_test_code(triangle_test)
         method = analytic.sphere_method_code(sphere_method)
         rays = self._rays(origins, directions, tmin, tmax)

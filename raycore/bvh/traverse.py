@@ -169,7 +169,7 @@ def _lane(blocks, slot, value):
     return blocks[slot // LANES, value * LANES + slot % LANES]
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, forceinline=True, error_model="numpy", _nrt=False)
 def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj, int_row,
                 real_row, hit_t, hit_obj, hit_prim, found):
     """Traverse mesh ``mesh``'s BVH with an object-space ray.
@@ -266,7 +266,7 @@ def _transform(m, r, x, y, z, w):
     )
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, forceinline=True, error_model="numpy", _nrt=False)
 def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tmax, int_row,
               real_row, hit_t, hit_obj, hit_prim):
     """Trace one ray through the scene.
@@ -376,7 +376,7 @@ def _share_vertex(blocks, p, q):
     return False
 
 
-@njit(cache=True, error_model="numpy", _nrt=False)
+@njit(cache=True, forceinline=True, error_model="numpy", _nrt=False)
 def merge_crossings(scene, hit_t, hit_obj, hit_prim, count):
     """Sort one ray's ``count`` crossings by t and merge those of one surface reported twice.
 
