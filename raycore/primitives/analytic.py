@@ -162,7 +162,7 @@ def analytic_hit(kind, params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
 DIRECTION_EXPONENT_LIMIT = 20
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=True, forceinline=True, error_model="numpy")
 def _analytic_hit(kind, params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
     if kind == SPHERE:
         return sphere.hit(params, ox, oy, oz, dx, dy, dz, tmin, tmax, method)
