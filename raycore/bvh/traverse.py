@@ -307,6 +307,14 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
     best_prim = -1
     best_u = best_v = like(ox, 0)
     found = 0
+    # A scene of one untransformed mesh, the common case, goes straight into the mesh's BVH:
+    # the loop over objects below costs 13-15 % on camera rays, most of which miss (bunny).
+    if len(top_nodes) == 0 and len(direct) == 1 and kind[direct[0]] == MESH and \
+            scene.xform_row[direct[0]] < 0:
+        t, p, u, v, found = _trace_mesh(
+            scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, best_t, scene.mesh_of[direct[0]],
+            direct[0], int_row, real_row, hit_t, hit_obj, hit_prim, found)
+        return t, direct[0] if p >= 0 else -1, p, u, v, found
     # The direct objects live outside the top-level BVH; they are processed first, as a leaf of
     # their own, so that they can shorten the ray before traversal.
     in_top = False
