@@ -15,7 +15,7 @@ def like(x, value):
     return type(x)(value)
 
 
-@overload(like, inline="always")
+@overload(like, jit_options={"forceinline": True})
 def _like(x, value):
     precision = x
 
@@ -30,7 +30,7 @@ def unit_roundoff(x):
     return np.finfo(type(x)).eps / 2
 
 
-@overload(unit_roundoff, inline="always")
+@overload(unit_roundoff, jit_options={"forceinline": True})
 def _unit_roundoff(x):
     precision = x
     u = 2.0**-24 if x == types.float32 else 2.0**-53
@@ -51,7 +51,7 @@ def gamma(n, x):
     return n * u / (1 - n * u)
 
 
-@overload(gamma, inline="always")
+@overload(gamma, jit_options={"forceinline": True})
 def _gamma(n, x):
     precision = x
     u = 2.0**-24 if x == types.float32 else 2.0**-53

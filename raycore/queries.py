@@ -24,6 +24,7 @@ from raycore.bvh.traverse import (
     COUNT,
     HIT_CAPACITY,
     MESH,
+    PARITY,
     new_scratch,
     trace_range,
 )
@@ -174,19 +175,30 @@ def any_hits(scene, rays, test, sphere_method):
     return first_bad, hit.view(np.bool_)
 
 
-def crossing_counts(scene, rays, test, sphere_method):
+def crossing_counts(scene, rays, test, sphere_method, mode=COUNT, out_hit=None):
     """First refused ray (or N), the (N,) int64 crossings of each ray (a shared edge or vertex
-    crossed once counts once), and the hit-list capacity that held every ray's crossings."""
+    crossed once counts once), and the hit-list capacity that held every ray's crossings.
+
+    With ``mode`` PARITY, ``out_hit`` ((N,) uint8) also receives whether each ray crosses some
+    closed object an odd number of times."""
     counts = np.empty(len(rays[0]), np.int64)
     capacity = HIT_CAPACITY
     while True:
-        first_bad = trace(scene, COUNT, rays, test, sphere_method, out_obj=counts,
-                          capacity=capacity)
+        first_bad = trace(scene, mode, rays, test, sphere_method, out_obj=counts,
+                          out_hit=out_hit, capacity=capacity)
         most = -int(counts.min()) if len(counts) else 0
         if first_bad < len(counts) or most <= capacity:
             return first_bad, counts, capacity
         # a ray crossed more surfaces than the list holds: again, with room for all of them
         capacity = most
+
+
+def odd_crossings(scene, rays, test, sphere_method):
+    """First refused ray (or N), and (N,) bool: whether each ray crosses some closed object an
+    odd number of times (it starts inside that object)."""
+    odd = np.empty(len(rays[0]), np.uint8)
+    first_bad, _, _ = crossing_counts(scene, rays, test, sphere_method, PARITY, odd)
+    return first_bad, odd.view(np.bool_)
 
 
 def all_hits(scene, rays, test, sphere_method):

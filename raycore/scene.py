@@ -19,12 +19,8 @@ from raycore.bvh.traverse import MESH
 from raycore.hits import SURFACE_FIELDS, AllHits, Hits
 from raycore.mesh import Mesh, validate_transform
 from raycore.primitives import analytic, box, cone, cylinder, disk, plane, sphere
-from raycore.primitives.triangle import triangle_test_code
+from raycore.primitives.triangle import WATERTIGHT, triangle_test_code
 from raycore.rays import as_float_array, ray_arrays, refuse, resolve_dtype
-
-#: Shapes that enclose a volume, so that ``contains`` can count crossings of them.
-_CLOSED_KINDS = {analytic.SPHERE, analytic.BOX, analytic.TRANSFORMED_BOX, analytic.CYLINDER,
-                 analytic.CONE, MESH}
 
 #: Directions for ``contains``: a majority vote over three rays makes the parity test robust to a
 #: ray that grazes a mesh (touches it without crossing).  Irrational-looking components keep them
@@ -362,18 +358,14 @@ class Scene:
         meshes and the closed analytic shapes; planes and disks enclose nothing and are ignored.
         """
         points = as_float_array(points, "points", self.dtype, (None, 3))
-        kinds = np.asarray(self._kind, np.int64)
-        closed = np.isin(kinds, list(_CLOSED_KINDS))
+        scene = self._scene()
         votes = np.zeros(len(points), np.int64)
+        directions = np.empty_like(points)
         for direction in _CONTAINS_DIRECTIONS:
-            hits = self.intersect_all(points, np.broadcast_to(direction, points.shape))
-            keep = closed[hits.geom_id]
-            # parity of crossings per (point, object)
-            key = hits.ray_index[keep] * len(kinds) + hits.geom_id[keep]
-            pairs, crossings = np.unique(key, return_counts=True)
-            inside = np.zeros(len(points), bool)
-            inside[pairs[crossings % 2 == 1] // len(kinds)] = True
-            votes += inside
+            directions[:] = direction
+            rays = self._rays(points, directions, 0.0, np.inf)
+            _, odd = queries.odd_crossings(scene, rays, WATERTIGHT, sphere.PRECISE)
+            votes += odd
         return votes >= 2
 
     # ------------------------------------------------------------------ interop

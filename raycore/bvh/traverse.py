@@ -25,10 +25,10 @@ from raycore._fp import gamma, like, unit_roundoff
 from raycore.bvh.build import MAX_DEPTH
 from raycore.bvh.layout import COUNTS, REFS, WIDTH
 from raycore.bvh.simd import LANES, enter8, lowest_set_bit, watertight4
-from raycore.primitives.analytic import analytic_hit
+from raycore.primitives.analytic import DISK, PLANE, analytic_hit
 from raycore.primitives.triangle import WATERTIGHT, triangle_hit, watertight_setup
 
-CLOSEST, ANY, COUNT, ALL = 0, 1, 2, 3
+CLOSEST, ANY, COUNT, ALL, PARITY = 0, 1, 2, 3, 4
 
 #: Object kind of a mesh instance; analytic kinds are the codes of ``raycore.primitives.analytic``.
 MESH = 16
@@ -275,7 +275,7 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
     ----------
     scene : SceneArrays
     mode : int
-        CLOSEST, ANY, COUNT or ALL.
+        CLOSEST, ANY, COUNT, ALL or PARITY.
     test, sphere_method : int
         Triangle test and sphere method codes.
     ox, oy, oz, dx, dy, dz, tmin, tmax : float
@@ -435,6 +435,22 @@ def merge_crossings(scene, hit_t, hit_obj, hit_prim, count):
 
 
 @njit(cache=True, inline="always")
+def _odd_crossings(scene, hit_obj, count):
+    """PARITY: whether the ray crosses some closed object (any but planes and disks) an odd
+    number of times, among its ``count`` merged crossings."""
+    for j in range(count):
+        obj = hit_obj[j]
+        if scene.kind[obj] == PLANE or scene.kind[obj] == DISK:
+            continue
+        crossings = 0
+        for k in range(count):
+            crossings += hit_obj[k] == obj
+        if crossings % 2 == 1:
+            return True
+    return False
+
+
+@njit(cache=True, inline="always")
 def _face_id(scene, obj, prim):
     """The primitive id users see: the face index for a mesh hit (``prim`` is a slot), the
     surface part's row 0 for an analytic shape."""
@@ -473,10 +489,11 @@ def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tma
     start, stop : int
     out_t, out_obj, out_prim : ndarray, shape (N,) or (0,)
         CLOSEST: t (inf on a miss), object (-1 on a miss) and primitive id (face index, or 0 for
-        an analytic shape; -1 on a miss).  COUNT and ALL: ``out_obj`` receives each ray's
-        crossing count, or minus the crossings found when the hit list was too short for them.
+        an analytic shape; -1 on a miss).  COUNT, ALL and PARITY: ``out_obj`` receives each
+        ray's crossing count, or minus the crossings found when the hit list was too short.
     out_hit : ndarray of uint8, shape (N,) or (0,)
-        ANY: 1 where the ray hits something.
+        ANY: 1 where the ray hits something.  PARITY: 1 where it crosses a closed object an
+        odd number of times.
     out_u, out_v, out_slot : ndarray, shape (N,) or (0,)
         CLOSEST, when not empty: barycentrics and the slot of mesh hits (surface fields).
     offsets, hits_t, hits_obj, hits_prim : ndarray
@@ -527,4 +544,6 @@ def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tma
                     hits_t[at + j] = hit_t[j]
                     hits_obj[at + j] = hit_obj[j]
                     hits_prim[at + j] = _face_id(scene, hit_obj[j], hit_prim[j])
+            elif mode == PARITY:
+                out_hit[i] = _odd_crossings(scene, hit_obj, kept)
     return first_bad
