@@ -301,7 +301,6 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
     stack = int_row[4 * WIDTH:4 * WIDTH + STACK_SIZE]
     entry = real_row[:WIDTH]
     stack_t = real_row[WIDTH + 3 * LANES:WIDTH + 3 * LANES + STACK_SIZE]
-    ix, iy, iz, fx, fy, fz = _ray_setup(ox, dx, dy, dz)
     best_t = tmax
     best_obj = -1
     best_prim = -1
@@ -315,6 +314,7 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
             scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, best_t, scene.mesh_of[direct[0]],
             direct[0], int_row, real_row, hit_t, hit_obj, hit_prim, found)
         return t, direct[0] if p >= 0 else -1, p, u, v, found
+    ix, iy, iz, fx, fy, fz = _ray_setup(ox, dx, dy, dz)
     # The direct objects live outside the top-level BVH; they are processed first, as a leaf of
     # their own, so that they can shorten the ray before traversal.
     in_top = False
