@@ -11,6 +11,10 @@ from raycore._cache import drop_stale_kernels  # noqa: E402
 
 drop_stale_kernels()  # before any kernel is loaded from the cache
 
+from raycore._compile_notice import announce_compiles  # noqa: E402
+
+announce_compiles()
+
 from raycore._info import info  # noqa: E402
 from raycore.hits import AllHits, Hits  # noqa: E402
 from raycore.offset import offset_ray_origin  # noqa: E402
