@@ -3,12 +3,13 @@
 1. A base image: Debian bookworm (python3 3.11, python3-venv, ca-certificates) made with
    debootstrap and ``podman import``, since no registry can be reached; kept between runs.
 2. ``podman build --isolation chroot --build-arg BASE=<that image>``: the Dockerfile's own build,
-   Numba cache warming and its check included.
+   ``raycore warmup`` and the check that the service then compiles nothing included.
 3. The image run as a container would run it, without a container engine: ``podman create`` and
    ``podman mount`` give the image's filesystem with a writable layer on top; the image's
    command runs under chroot as the image's user, with the image's environment and working
    directory, on a free loopback port (the host's network), in its own process group.
-4. Over HTTP: /healthz (and the image's HEALTHCHECK command), a mesh upload, scenes, ray batches
+4. ``raycore info`` in the container and /readyz: Numba's TBB threading layer.
+   Over HTTP: /healthz (and the image's HEALTHCHECK command), a mesh upload, scenes, ray batches
    as JSON and .npy, PNG renders, each kind of request twice, timed: the first request to the
    fresh container must not compile kernels.  Proof: the timings, and Numba's cache directory
    in the container is left exactly as the image had it (a compiled kernel would be written
@@ -34,6 +35,7 @@ import struct
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import zlib
 from pathlib import Path
@@ -560,6 +562,25 @@ def exercise(client):
                   f"the PNG is {size}, asked for {camera['width']}x{camera['height']}")
     passed("renders are PNGs that decode to the requested size")
 
+    # clients at once: the worker's compute slots run their kernels side by side
+    path = f"/v1/scenes/{scenes['float32']['id']}/render"
+    body = json.dumps({"camera": cameras[0], "shading": "lambert"}).encode()
+    alone = request(client.url, "POST", path, body, "application/json")
+    answers = []
+
+    def send():
+        answers.extend(request(client.url, "POST", path, body, "application/json")
+                       for _ in range(4))
+
+    senders = [threading.Thread(target=send) for _ in range(8)]
+    for sender in senders:
+        sender.start()
+    for sender in senders:
+        sender.join()
+    check(alone[0] == 200 and len(answers) == 32 and all(a == alone for a in answers),
+          "renders sent at once differ from the one sent alone (or failed)")
+    passed("8 clients rendering at once get the image that one alone gets")
+
 
 def print_timings(timings, title):
     print(f"\n{title:<46} {'first':>9} {'second':>9}")
@@ -574,6 +595,24 @@ def numba_cache_dir(config):
     if not directory:
         raise TestFailed("the image sets no NUMBA_CACHE_DIR: the test cannot see its kernels")
     return directory
+
+
+def check_threading_layer(container, server):
+    """The image runs Numba's TBB layer, thread-safe and fork-safe: as `raycore info` says in
+    the container, and as the service's /readyz says."""
+    run = subprocess.run(container.command(["raycore", "info", "--json"], {}), timeout=120,
+                         capture_output=True, text=True)
+    if run.returncode != 0:
+        raise TestFailed(f"raycore info failed in the container:\n{run.stderr[-2000:]}")
+    info = json.loads(run.stdout)
+    if (info["threading_layer"], info["thread_safe"], info["fork_safe"]) != ("tbb", True, True):
+        raise TestFailed(f"the image runs Numba's {info['threading_layer']} layer, not tbb")
+    status, _, body = request(server.url, "GET", "/readyz")
+    ready = json.loads(body)
+    if status != 200 or ready.get("threading_layer") != "tbb" or not ready.get("threads"):
+        raise TestFailed(f"/readyz answered {status}: {ready}")
+    passed(f"the image runs on Numba's TBB layer with {ready['threads']} threads (raycore info, "
+           "/readyz)")
 
 
 def test_single_worker(container, work):
@@ -599,6 +638,7 @@ def test_single_worker(container, work):
         if subprocess.run(check, timeout=60).returncode != 0:
             raise TestFailed("the image's HEALTHCHECK failed on a healthy server")
         passed("the image's HEALTHCHECK passes")
+        check_threading_layer(container, server)
         client = Client(server.url)
         exercise(client)
         log(f"resident memory after the requests: {server.memory()}")

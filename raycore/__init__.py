@@ -3,12 +3,21 @@
 NumPy arrays in and out, compiled (Numba) kernels inside.
 """
 
-from raycore._cache import drop_stale_kernels
+from raycore._threading import choose_layer
+
+choose_layer()  # before any parallel kernel is linked: TBB, else workqueue, never OpenMP
+
+from raycore._cache import drop_stale_kernels  # noqa: E402
 
 drop_stale_kernels()  # before any kernel is loaded from the cache
 
+from raycore._compile_notice import announce_compiles  # noqa: E402
+
+announce_compiles()
+
+from raycore._info import info  # noqa: E402
 from raycore.hits import AllHits, Hits  # noqa: E402
 from raycore.offset import offset_ray_origin  # noqa: E402
 from raycore.scene import Scene  # noqa: E402
 
-__all__ = ["AllHits", "Hits", "Scene", "offset_ray_origin"]
+__all__ = ["AllHits", "Hits", "Scene", "info", "offset_ray_origin"]

@@ -1,5 +1,6 @@
 """The ``raycore`` command: ``raycore serve`` runs the HTTP service, ``raycore openapi`` writes
-its OpenAPI document."""
+its OpenAPI document, ``raycore info`` says what the library runs on, ``raycore warmup``
+compiles its kernels ahead of use."""
 
 import argparse
 import json
@@ -26,6 +27,31 @@ def _openapi(args):
             file.write(document)
 
 
+def _info(args):
+    import raycore
+
+    report = raycore.info()
+    if args.json:
+        print(json.dumps(report, indent=2))
+        return
+    safety = [name for name, safe in (("thread-safe", report["thread_safe"]),
+                                      ("fork-safe", report["fork_safe"])) if safe]
+    print(f"threading layer   {report['threading_layer']} ({', '.join(safety) or 'unsafe'})")
+    print(f"threads           {report['threads']}")
+    print(f"cpu               {report['cpu']}")
+    print(f"simd              {' '.join(report['simd']) or 'none'}")
+    print(f"numba cache       {report['numba_cache_dir']}")
+    print(f"numba             {report['numba']}")
+
+
+def _warmup(args):
+    from raycore._warmup import DTYPES, warm_up
+
+    dtypes = DTYPES if args.dtype == "both" else (args.dtype,)
+    seconds = warm_up(dtypes)
+    print(f"raycore warmup: done in {seconds:.1f} s")
+
+
 def main(argv=None):
     """Parse ``argv`` (default: the command line) and run the subcommand."""
     parser = argparse.ArgumentParser(prog="raycore", description="Ray casting library and service")
@@ -40,6 +66,15 @@ def main(argv=None):
     openapi = commands.add_parser("openapi", help="write the HTTP API's OpenAPI document")
     openapi.add_argument("--output", default="-", help="file to write, or - for stdout")
     openapi.set_defaults(run=_openapi)
+    info = commands.add_parser(
+        "info", help="the threading layer, threads, CPU features and kernel cache in use")
+    info.add_argument("--json", action="store_true", help="as JSON, as raycore.info() gives it")
+    info.set_defaults(run=_info)
+    warmup = commands.add_parser(
+        "warmup", help="compile every kernel ahead of use, into Numba's cache")
+    warmup.add_argument("--dtype", default="both", choices=["float32", "float64", "both"],
+                        help="precision of the scenes to compile for (default: both)")
+    warmup.set_defaults(run=_warmup)
     args = parser.parse_args(argv)
     args.run(args)
 

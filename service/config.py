@@ -28,9 +28,9 @@ class Settings:
     store_bytes : int
         Memory budget of the scene and mesh store; least recently used entries go first.
     compute_slots : int
-        Requests that run geometry work at once.  Each query already uses every core, so more
-        slots mostly add memory; and more than one is only safe when Numba's threading layer
-        is thread-safe (omp or tbb: the workqueue layer aborts on concurrent parallel kernels).
+        Requests that run geometry work at once, each on all of Numba's threads.  Safe on every
+        threading layer raycore runs on (tbb; or workqueue, where raycore lets one parallel
+        loop run at a time).
     body_seconds : int
         Seconds a client has, from its request's arrival, to send the whole body (408 after):
         a slow or stalled upload must not hold a connection and its buffers for ever.

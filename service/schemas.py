@@ -280,9 +280,22 @@ class RenderRequest(Strict):
 
 
 class Status(BaseModel):
-    status: Literal["ok", "ready", "starting"]
+    status: Literal["ok"]
 
     model_config = ConfigDict(json_schema_extra={"examples": [{"status": "ok"}]})
+
+
+class Readiness(BaseModel):
+    """Whether startup work is done, and what the kernels run on (no more: the probe is open)."""
+
+    status: Literal["ready", "starting"]
+    threading_layer: str = Field(
+        description="Numba's threading layer: tbb (thread-safe and fork-safe), or workqueue "
+                    "where TBB cannot load (one parallel kernel at a time)")
+    threads: int = Field(description="Threads each query's parallel kernels run on")
+
+    model_config = ConfigDict(json_schema_extra={"examples": [
+        {"status": "ready", "threading_layer": "tbb", "threads": 2}]})
 
 
 # ---------------------------------------------------------------------- error documentation

@@ -8,6 +8,7 @@ import numpy as np
 import trimesh
 from fastapi.testclient import TestClient
 
+import raycore
 import service.app
 from service.app import create_app
 from service.demo import DEMO_CAMERA, demo_spec, load_demo, torus
@@ -18,16 +19,20 @@ from .test_render_png import decode
 
 def test_healthz_and_readyz_without_demo(client):
     assert client.get("/healthz").json() == {"status": "ok"}
-    assert client.get("/readyz").json() == {"status": "ready"}
+    # the layer and thread count, and nothing more: the probe needs no key
+    report = raycore.info()
+    assert client.get("/readyz").json() == {
+        "status": "ready", "threading_layer": report["threading_layer"],
+        "threads": report["threads"]}
 
 
 def wait_ready(client, timeout=600):
     deadline = time.monotonic() + timeout
     while (response := client.get("/readyz")).status_code == 503:
-        assert response.json() == {"status": "starting"}
+        assert response.json()["status"] == "starting"
         assert time.monotonic() < deadline, "the demo scene did not load"
         time.sleep(0.1)
-    assert response.json() == {"status": "ready"}
+    assert response.json()["status"] == "ready"
 
 
 def test_demo_scene_is_served_and_renders():
@@ -48,8 +53,8 @@ def test_demo_scene_is_served_and_renders():
 
 
 def test_demo_loads_in_a_compute_slot(monkeypatch):
-    # Numba's workqueue layer (the image's) aborts when two threads run parallel loops at once,
-    # so a request's kernels must wait for the demo's
+    # the demo's work holds a compute slot like a request's (with RAYCORE_COMPUTE_SLOTS=1, a
+    # request waits for it)
     loading, released_at = threading.Event(), []
 
     def slow_demo(state):

@@ -1,104 +1,38 @@
-"""Fill Numba's on-disk cache at image build time, so that a new container compiles nothing.
+"""Check that ``raycore warmup`` left nothing for the service to compile.
 
-Runs the service's own app in this process (``service.app.create_app``, settings from the
-environment, the demo scene included) and drives it through ASGI with a matrix of requests that
-reaches every kernel the HTTP API uses, in both precisions: scene builds (every shape, uploaded
-and inline meshes, instances), closest hits with each surface field, any, all and count queries
+``raycore warmup`` compiles every kernel that raycore's public calls reach, through the library
+alone.  This script drives the service's own app (``service.app.create_app``, settings from the
+environment, the demo scene included) through Starlette's TestClient with a matrix of requests
+that reaches every route with every kind of input: scene builds (every shape, uploaded and
+inline meshes, instances), closest hits with each surface field, any, all and count queries
 with each triangle test, JSON and .npy ray batches (float32 and float64, (N, 6) and (N, 8),
-scalar and per-ray tmin/tmax, JSON and .npy answers), and renders with every shading and camera.
-Going through the routes, rather than calling the library, gives the kernels exactly the array
-types, layouts and dtypes that requests give them, which is what Numba specialises on.
+Fortran-ordered, scalar and per-ray tmin/tmax, JSON and .npy answers), and renders with every
+shading and camera.  The routes hand the kernels the array types, layouts and dtypes that
+requests give them, which is what Numba specialises on.
 
-Then it starts a second interpreter (``--check``) that sends the same requests and fails if
-Numba compiled anything there: every kernel has to come from the cache.
+Two checks:
 
-Usage (as the user the service runs as, with the NUMBA_CACHE_DIR it runs with)::
+* by default, in a fresh interpreter after ``raycore warmup`` (the image's build): nothing may
+  compile, every kernel must come from Numba's cache;
+* ``--after-warmup`` runs the warm-up in this process first, then fails if the requests reach
+  any kernel signature that it did not, whether compiled or loaded from the cache: the same
+  coverage on any cache, cold or warm (``make test`` runs it, tests/test_warmup.py).
 
-    python warm_cache.py           # warm, then check in a fresh process
-    python warm_cache.py --check   # only check
-
-Standard library, NumPy and the service; no HTTP client and no network.
+Needs the service and httpx (for the TestClient); the image installs httpx for this step only.
 """
 
 import argparse
-import asyncio
 import io
 import json
 import os
-import subprocess
 import sys
 import time
-from urllib.parse import urlencode
 
 import numpy as np
 
 DTYPES = ("float32", "float64")
 TRIANGLE_TESTS = ("watertight", "moller", "geometric")
 NPY = "application/x-npy"
-
-
-# ----------------------------------------------------------------------------- ASGI client
-
-
-class AsgiClient:
-    """Just enough of an HTTP client to call an ASGI app in this process (lifespan included)."""
-
-    def __init__(self, app):
-        self.app = app
-        self.state = {}
-
-    async def __aenter__(self):
-        self._inbox, self._outbox = asyncio.Queue(), asyncio.Queue()
-        scope = {"type": "lifespan", "asgi": {"version": "3.0"}, "state": self.state}
-        self._lifespan = asyncio.create_task(self.app(scope, self._inbox.get, self._outbox.put))
-        await self._inbox.put({"type": "lifespan.startup"})
-        message = await self._outbox.get()
-        if message["type"] != "lifespan.startup.complete":
-            raise RuntimeError(f"the app did not start: {message}")
-        return self
-
-    async def __aexit__(self, *exc):
-        await self._inbox.put({"type": "lifespan.shutdown"})
-        await self._outbox.get()
-        await self._lifespan
-
-    async def request(self, method, path, body=b"", content_type=None, accept=None, query=None):
-        """Returns (status, content type, body bytes)."""
-        headers = [(b"host", b"warm"), (b"content-length", str(len(body)).encode())]
-        if content_type:
-            headers.append((b"content-type", content_type.encode()))
-        if accept:
-            headers.append((b"accept", accept.encode()))
-        scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1",
-                 "method": method, "scheme": "http", "path": path, "raw_path": path.encode(),
-                 "query_string": urlencode(query or {}, doseq=True).encode(), "root_path": "",
-                 "headers": headers, "client": ("127.0.0.1", 1), "server": ("warm", 80),
-                 "state": dict(self.state)}
-        done = asyncio.Event()
-        pending = [{"type": "http.request", "body": body, "more_body": False}]
-        answer = {"status": None, "type": "", "body": []}
-
-        async def receive():
-            if pending:
-                return pending.pop()
-            await done.wait()
-            return {"type": "http.disconnect"}
-
-        async def send(message):
-            if message["type"] == "http.response.start":
-                answer["status"] = message["status"]
-                answer["type"] = dict(message.get("headers", [])).get(b"content-type", b"")
-            elif message["type"] == "http.response.body":
-                answer["body"].append(message.get("body", b""))
-                if not message.get("more_body", False):
-                    done.set()
-
-        try:
-            await self.app(scope, receive, send)
-        except Exception as error:  # re-raised by the app after it answered 500
-            answer["status"], answer["body"] = 500, [repr(error).encode()]
-        done.set()
-        return answer["status"], answer["type"].decode(), b"".join(answer["body"])
 
 
 # ----------------------------------------------------------------------------- inputs
@@ -145,14 +79,6 @@ def stl_bytes(vertices, faces):
     record = np.zeros(len(faces), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
     record["n"], record["v"] = normals, triangles
     return b"\0" * 80 + np.uint32(len(faces)).tobytes() + record.tobytes()
-
-
-def multipart(name, filename, data):
-    boundary = "raycorewarmboundary"
-    body = (f"--{boundary}\r\nContent-Disposition: form-data; name=\"{name}\"; "
-            f"filename=\"{filename}\"\r\nContent-Type: application/octet-stream\r\n\r\n"
-            ).encode() + data + f"\r\n--{boundary}--\r\n".encode()
-    return body, f"multipart/form-data; boundary={boundary}"
 
 
 def npy_bytes(array):
@@ -278,89 +204,102 @@ class CompileLog:
         event.register("numba:compile", Listener())
 
 
-async def exercise(client, log):
+def kernel_signatures():
+    """{(module.function, argument types)} of every kernel of raycore loaded in this process,
+    compiled or from the cache."""
+    from numba.core.dispatcher import Dispatcher
+
+    found = set()
+    for name, module in list(sys.modules.items()):
+        if name != "raycore" and not name.startswith("raycore."):
+            continue
+        for attribute, value in vars(module).items():
+            if isinstance(value, Dispatcher):
+                found.update((f"{name}.{attribute}", types) for types in value.overloads)
+    return found
+
+
+def exercise(client):
     """Send every request; returns how many.  Raises on an unexpected answer."""
     sent = 0
 
-    async def call(what, method, path, body=b"", content_type=None, accept=None, query=None,
-                   ok=(200, 201)):
+    def call(what, method, path, ok=(200, 201), accept=None, **request):
         nonlocal sent
-        status, media, data = await client.request(method, path, body, content_type, accept,
-                                                    query)
+        headers = {**request.pop("headers", {}), **({"accept": accept} if accept else {})}
+        response = client.request(method, path, headers=headers, **request)
         sent += 1
-        if status not in ok:
-            raise RuntimeError(f"{what}: {method} {path} answered {status}: {data[:500]!r}")
-        if accept == NPY and media != NPY:
-            raise RuntimeError(f"{what}: asked for .npy, got {media}")
-        return data
+        if response.status_code not in ok:
+            raise RuntimeError(f"{what}: {method} {path} answered {response.status_code}: "
+                               f"{response.content[:500]!r}")
+        if accept == NPY and response.headers["content-type"] != NPY:
+            raise RuntimeError(f"{what}: asked for .npy, got {response.headers['content-type']}")
+        return response
 
     deadline = time.monotonic() + 600
-    while (await client.request("GET", "/readyz"))[0] != 200:
+    while client.get("/readyz").status_code != 200:
         if time.monotonic() > deadline:
             raise RuntimeError("/readyz did not answer 200 within 600 s")
-        await asyncio.sleep(0.1)
-    await call("healthz", "GET", "/healthz")
+        time.sleep(0.1)
+    call("healthz", "GET", "/healthz")
     vertices, faces = icosphere(2)
-    mesh = json.loads(await call("upload obj", "POST", "/v1/meshes", obj_bytes(vertices, faces),
-                                 "model/obj"))
-    body, form = multipart("file", "sphere.stl", stl_bytes(*icosphere(1)))
-    await call("upload stl form", "POST", "/v1/meshes", body, form)
-    await call("get mesh", "GET", f"/v1/meshes/{mesh['id']}")
+    mesh = call("upload obj", "POST", "/v1/meshes", content=obj_bytes(vertices, faces),
+                headers={"content-type": "model/obj"}).json()
+    call("upload stl form", "POST", "/v1/meshes",
+         files={"file": ("sphere.stl", stl_bytes(*icosphere(1)), "application/octet-stream")})
+    call("get mesh", "GET", f"/v1/meshes/{mesh['id']}")
     for number, (dtype, spec) in enumerate(scenes(mesh["id"])):
-        started = len(log.compiled)
-        scene = json.loads(await call(f"scene {number}", "POST", "/v1/scenes",
-                                      json.dumps(spec).encode(), "application/json"))
+        scene = call(f"scene {number}", "POST", "/v1/scenes", json=spec).json()
         path = f"/v1/scenes/{scene['id']}"
         for what, body, content_type, accept, query in intersect_requests(number):
-            await call(f"scene {number} {what}", "POST", f"{path}/intersect", body,
-                       content_type, accept, query)
+            call(f"scene {number} {what}", "POST", f"{path}/intersect", content=body,
+                 headers={"content-type": content_type}, accept=accept, params=query)
         for request in render_requests():
-            png = await call(f"scene {number} render {request}", "POST", f"{path}/render",
-                             json.dumps(request).encode(), "application/json")
+            png = call(f"scene {number} render {request}", "POST", f"{path}/render",
+                       json=request).content
             if not png.startswith(b"\x89PNG\r\n\x1a\n"):
                 raise RuntimeError(f"render {request} is not a PNG")
-        print(f"  scene {number} ({dtype}, {len(spec['objects'])} objects): "
-              f"{len(log.compiled) - started} compilations", flush=True)
-    await call("demo render", "POST", "/v1/scenes/demo/render",
-               json.dumps({"camera": {"type": "perspective", "position": [7, 5, -9],
-                                      "look_at": [0, 1, 0], "width": 32, "height": 24}}).encode(),
-               "application/json")
+        print(f"  scene {number} ({dtype}, {len(spec['objects'])} objects): done", flush=True)
+    call("demo render", "POST", "/v1/scenes/demo/render",
+         json={"camera": {"type": "perspective", "position": [7, 5, -9], "look_at": [0, 1, 0],
+                          "width": 32, "height": 24}})
     return sent
-
-
-def run(check):
-    log = CompileLog()
-    from service.app import create_app
-
-    async def main():
-        async with AsgiClient(create_app()) as client:
-            return await exercise(client, log)
-
-    started = time.perf_counter()
-    sent = asyncio.run(main())
-    seconds = time.perf_counter() - started
-    print(f"{'check' if check else 'warm'}: {sent} requests in {seconds:.1f} s, "
-          f"{len(log.compiled)} functions compiled", flush=True)
-    if check and log.compiled:
-        print("compiled although the cache should hold them:\n  " + "\n  ".join(log.compiled),
-              file=sys.stderr)
-        return 1
-    return 0
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--check", action="store_true",
-                        help="only check that nothing compiles (the cache is warm)")
+    parser.add_argument("--after-warmup", action="store_true",
+                        help="warm up in this process first, then check that the requests "
+                             "reach no kernel signature the warm-up did not")
     args = parser.parse_args(argv)
     print(f"NUMBA_CACHE_DIR={os.environ.get('NUMBA_CACHE_DIR', '(unset: next to the sources)')}",
           flush=True)
-    if args.check:
-        return run(check=True)
-    if run(check=False):
+    log = CompileLog()
+    from starlette.testclient import TestClient
+
+    from raycore._warmup import warm_up
+    from service.app import create_app
+
+    if args.after_warmup:
+        warm_up()
+    warmed = kernel_signatures()
+    del log.compiled[:]  # the warm-up's
+    started = time.perf_counter()
+    with TestClient(create_app()) as client:
+        sent = exercise(client)
+    print(f"{sent} requests in {time.perf_counter() - started:.1f} s, "
+          f"{len(log.compiled)} functions compiled", flush=True)
+    if args.after_warmup:
+        missed = sorted(map(str, kernel_signatures() - warmed))
+        if missed:
+            print("the requests reached kernel signatures that `raycore warmup` does not:\n  "
+                  + "\n  ".join(missed), file=sys.stderr)
+            return 1
+        print("the requests reached no kernel signature beyond the warm-up's", flush=True)
+    elif log.compiled:
+        print("compiled although `raycore warmup` should have:\n  " + "\n  ".join(log.compiled),
+              file=sys.stderr)
         return 1
-    # a fresh interpreter: nothing loaded, so every kernel must come from the disk cache
-    return subprocess.call([sys.executable, os.path.abspath(__file__), "--check"])
+    return 0
 
 
 if __name__ == "__main__":

@@ -1,0 +1,38 @@
+"""One line on stderr when raycore's kernels start compiling in this process.
+
+Numba compiles a kernel at its first call with new argument types, unless its on-disk cache
+holds it; the first calls after installing raycore (or on a new kind of CPU) therefore wait
+while it compiles.  Numba broadcasts a ``numba:compile`` event only when it compiles, not when
+it loads a kernel from its cache, so a warm cache shows nothing.  The line goes to stderr, which
+Python shows by default, as do notebooks (where logging's INFO level is hidden).
+"""
+
+import sys
+
+from numba.core import event
+
+MESSAGE = ("raycore: compiling kernels for this CPU, once (up to a minute; later runs load them "
+           "from Numba's cache, and `raycore warmup` compiles them all ahead of use)")
+
+
+class CompileNotice(event.Listener):
+    """Prints :data:`MESSAGE` at the first compilation of a raycore kernel, then nothing."""
+
+    def __init__(self, stream=None):
+        self.stream = stream
+        self.shown = False
+
+    def on_start(self, ev):
+        # Numba compiles under its global compiler lock: no two threads get here at once
+        if self.shown or not ev.data["dispatcher"].py_func.__module__.startswith("raycore."):
+            return
+        self.shown = True
+        print(MESSAGE, file=self.stream or sys.stderr, flush=True)
+
+    def on_end(self, ev):
+        pass
+
+
+def announce_compiles():
+    """Listen for raycore's first compilation in this process (once, at import)."""
+    event.register("numba:compile", CompileNotice())

@@ -1,0 +1,60 @@
+"""What raycore runs on: :func:`info`, and ``raycore info`` on the command line."""
+
+import numba
+from llvmlite import binding as llvm
+from numba import config
+from numba.core.caching import FunctionCache
+
+from raycore import _threading
+
+#: Feature names of vector instruction sets, as LLVM spells them (x86, Arm, POWER).
+_SIMD_PREFIXES = ("sse", "ssse", "avx", "fma", "f16c", "neon", "sve", "altivec", "vsx")
+
+
+def info():
+    """Describe the threading layer, threads, CPU and kernel cache that raycore uses.
+
+    Returns
+    -------
+    dict
+        ``threading_layer`` : str
+            Numba's layer: ``"tbb"``, or ``"workqueue"`` where TBB cannot load (one parallel
+            kernel at a time), or ``"omp"`` only when chosen outside raycore.
+        ``thread_safe``, ``fork_safe`` : bool
+            Whether threads may query at once, and whether a forked child may query after its
+            parent did.
+        ``threads`` : int
+            Threads each parallel kernel runs on (``NUMBA_NUM_THREADS``, or
+            ``numba.set_num_threads`` in this thread).
+        ``cpu`` : str
+            The CPU the kernels are compiled for (``NUMBA_CPU_NAME``, else this machine's).
+        ``simd`` : list of str
+            Its vector instruction sets, as LLVM names them (``avx2``, ``avx512f``, ...).
+        ``numba_cache_dir`` : str
+            Where Numba keeps the compiled kernels of raycore's top-level modules; those of its
+            subpackages sit beside it (under ``NUMBA_CACHE_DIR``, or in each package's
+            ``__pycache__``).
+        ``numba`` : str
+            Numba's version.
+    """
+    layer = _threading.threading_layer()
+    thread_safe, fork_safe = _threading.SAFETY[layer]
+    return {
+        "threading_layer": layer,
+        "thread_safe": thread_safe,
+        "fork_safe": fork_safe,
+        "threads": numba.get_num_threads(),
+        "cpu": config.CPU_NAME or llvm.get_host_cpu_name(),
+        "simd": simd_features(),
+        "numba_cache_dir": FunctionCache(info).cache_path,
+        "numba": numba.__version__,
+    }
+
+
+def simd_features():
+    """Sorted names of the vector instruction sets the kernels are compiled with."""
+    if config.CPU_FEATURES is not None:  # NUMBA_CPU_FEATURES, e.g. "+avx2,+fma,-avx512f"
+        enabled = [f[1:] for f in config.CPU_FEATURES.split(",") if f.startswith("+")]
+    else:
+        enabled = [name for name, on in llvm.get_host_cpu_features().items() if on]
+    return sorted(name for name in enabled if name.startswith(_SIMD_PREFIXES))
