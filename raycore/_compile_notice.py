@@ -11,8 +11,8 @@ import sys
 
 from numba.core import event
 
-MESSAGE = ("raycore: compiling kernels for this CPU, once (up to a minute; later runs load them "
-           "from Numba's cache, and `raycore warmup` compiles them all ahead of use)")
+MESSAGE = ("raycore: compiling kernels for this CPU, once (about half a minute; later runs load "
+           "them from Numba's cache, and `raycore warmup` compiles them all ahead of use)")
 
 
 class CompileNotice(event.Listener):
@@ -23,8 +23,10 @@ class CompileNotice(event.Listener):
         self.shown = False
 
     def on_start(self, ev):
-        # Numba compiles under its global compiler lock: no two threads get here at once
-        if self.shown or not ev.data["dispatcher"].py_func.__module__.startswith("raycore."):
+        # Numba compiles under its global compiler lock: no two threads get here at once.
+        # Functions Numba makes itself (overload implementations) may have no module.
+        module = ev.data["dispatcher"].py_func.__module__ or ""
+        if self.shown or not module.startswith("raycore."):
             return
         self.shown = True
         print(MESSAGE, file=self.stream or sys.stderr, flush=True)
