@@ -98,9 +98,9 @@ def validate_transform(transform):
 
 # Affine matrices are inverted and composed here in exact integer arithmetic (a float64 is an
 # integer over a power of two) and rounded once, so that every machine stores the same bits.
-# NumPy's inv and matmul run OpenBLAS kernels chosen for the CPU: on an AVX2-only EPYC and on an
-# AVX-512 Zen 4 they gave inverses a few ulps apart, which moved a float64 hit on an instance by
-# 160 ulps between the two (a ray meeting the triangle at 1.3 degrees, tests/scene/brute.py).
+# NumPy's inv and matmul run OpenBLAS kernels chosen for the CPU: for one transform, the kernels
+# of an AVX2-only EPYC and of an AVX-512 Zen 4 gave inverses up to 6 ulps apart, which moved the
+# float64 t of a ray grazing an instance's triangle (at 1.3 degrees) by 42 ulps.
 
 
 def _integers(matrix):
@@ -118,7 +118,7 @@ def _rounded(numerator, denominator):
     try:
         return numerator / denominator
     except OverflowError as error:
-        raise ValueError("transform (its inverse) overflows float64") from error
+        raise ValueError("transform overflows float64 once inverted or composed") from error
 
 
 def _adjugate(rows):
@@ -175,7 +175,7 @@ def condition_number(linear):
 
     Within a factor 3 of the 2-norm condition number either way, equal to it for a scaling, and
     the same on every machine (``np.linalg.cond`` runs LAPACK's SVD, whose last bits depend on
-    the CPU, so a transform near the limit was accepted on one machine and refused on another).
+    the CPU: a transform near a limit could pass on one machine and fail on another).
     """
     ints, _ = _integers(linear)
     adjugate, det = _adjugate(ints)
