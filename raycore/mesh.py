@@ -56,7 +56,7 @@ class Mesh:
         lo, hi = self.bounds
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                             for z in (lo[2], hi[2])])
-        world = corners @ matrix[:3, :3].T + matrix[:3, 3]
+        world = transform_points(matrix, corners)
         return world.min(axis=0), world.max(axis=0)
 
     def build(self, dtype, params):

@@ -6,7 +6,8 @@ OpenBLAS also picks for Zen 1-3), Numba kernels compiled for an AVX2 Zen 2 with 
 feature off (into an empty cache, so they are compiled for that target), and NumPy's loops
 without AVX-512.  It runs the brute-force comparison on the instances and transformed boxes of
 the seed-1 scene, where a fresh clone failed on the AVX2 machine (ray 583, float64: a 1e-14
-difference in t), and its answers must equal this process's bit for bit.
+difference in t), and its answers there and on the whole scene (every kind of object) must equal
+this process's bit for bit.
 
 The child compiles its kernels from scratch: about a minute on an idle 2-core machine (up to 4
 under load); the queries themselves take a few seconds.
@@ -46,22 +47,28 @@ def transformed_objects(seed):
 
 
 def answers(dtype, path):
-    """Check every query on :func:`transformed_objects` against brute force, and save the
-    answers to ``path`` (.npz)."""
+    """Check the queries on :func:`transformed_objects` against brute force, and save their
+    answers and those on the whole seeded scene to ``path`` (.npz)."""
     spec = transformed_objects(SEED)
     origins, directions, tmin, tmax, _ = scene_rays(SEED)
     ref = spec.reference(origins, directions, dtype=dtype, tmin=tmin, tmax=tmax)
-    scene = spec.scene(dtype)
     fields = ("uv", "normal", "point")
-    hits = scene.intersect(origins, directions, tmin, tmax, fields=fields)
-    all_hits = scene.intersect_all(origins, directions, tmin, tmax)
-    excused = compare_closest(hits, ref, spec, fields=fields) + compare_all(all_hits, ref, spec)
-    assert excused <= 0.02 * len(origins)
+    saved = {}
+    for name, scene in [("transformed", spec.scene(dtype)),
+                        ("scene", random_scene(SEED)[0].scene(dtype))]:
+        hits = scene.intersect(origins, directions, tmin, tmax, fields=fields)
+        all_hits = scene.intersect_all(origins, directions, tmin, tmax)
+        saved.update({f"{name}_{key}": value for key, value in [
+            ("t", hits.t), ("geom", hits.geom_id), ("prim", hits.prim_id), ("uv", hits.uv),
+            ("normal", hits.normal), ("point", hits.point), ("all_t", all_hits.t),
+            ("all_geom", all_hits.geom_id), ("all_prim", all_hits.prim_id)]})
+        if name == "transformed":
+            excused = (compare_closest(hits, ref, spec, fields=fields)
+                       + compare_all(all_hits, ref, spec))
+            assert excused <= 0.02 * len(origins)
     # the data: hits on instances and on boxes
     assert np.sum(ref.instance) > 500 and np.sum(~ref.instance) > 50
-    np.savez(path, t=hits.t, geom=hits.geom_id, prim=hits.prim_id, uv=hits.uv,
-             normal=hits.normal, point=hits.point, all_t=all_hits.t, all_geom=all_hits.geom_id,
-             all_prim=all_hits.prim_id)
+    np.savez(path, **saved)
 
 
 def avx2_environment(cache):
