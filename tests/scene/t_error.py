@@ -6,7 +6,10 @@ two ``t`` differ by rounding.  Each is bounded here against the exact ``t``: the
 the scene's precision holds it) against the exact triangle ``L v + m``.  The tolerance between
 them is the sum of the two bounds (:func:`instance_tolerance`).
 
-Everything is first order in the unit roundoff u (2^-53 in float64, 2^-24 in float32).
+Everything is first order in the unit roundoff u (2^-53 in float64, 2^-24 in float32), except
+the division by each test's determinant: when its relative error ``ρ`` (given with each test) is
+not small, as on a thin triangle grazed in float32, the error grows by ``1 / (1 − ρ)``, and the
+bound is divided by that (infinite for ``ρ ≥ 1``).
 
 **Moving the ray or the triangle.**  A ray ``o + t d`` meets a plane with unit normal ``n`` at
 ``t``.  Moving the plane by ``δ`` along ``n``, the origin by ``δo`` and the direction by ``δd``
@@ -37,7 +40,8 @@ o‖∞``, ``E`` the longest edge in the ∞-norm, ``A`` the area and ``kz`` the
   together err by ``Σ|δU| ≤ 48u E²``, against ``det = U + V + W = 2A |n·d| / ‖d‖∞``.  ``t`` is the
   mean of the vertices' ``z_i = A_i[kz] / d[kz]`` weighted by ``U / det`` (weights summing to 1),
   and ``|z_i − t| ≤ E / ‖d‖∞``, so the weights' errors move ``t`` by at most
-  ``(2 Σ|δU| / det) E / ‖d‖∞ = 48u E³ / (A |n·d|)``;
+  ``(2 Σ|δU| / det) E / ‖d‖∞ = 48u E³ / (A |n·d|)``; ``ρ = Σ|δU| / det = 24u (E² / A) ‖d‖∞ /
+  |n·d|``;
 * ``z_i = S_z A[kz]`` (two roundings), ``T = Σ U z_i`` (three more on each term), ``det`` (two,
   relative: the ``U`` share a sign) and ``T / det`` (one): ``8u max|z_i| ≤ 8u D / ‖d‖∞``.
 
@@ -45,14 +49,14 @@ o‖∞``, ``E`` the longest edge in the ∞-norm, ``A`` the area and ``kz`` the
 ``b``, ``c`` by ``u E`` and ``o`` by ``u D``: ``u ‖n‖₁ (D + E) / |n·d|``.  ``p = d × e2`` errs by
 ``4u ‖d‖∞ E`` per component (each at most ``2 ‖d‖∞ E``), ``q = s × e1`` by ``4u D E`` (each at most
 ``2 D E``); the dot products ``e1·p`` and ``e2·q`` then err by ``30u E² ‖d‖∞`` and ``30u E² D``,
-against ``det = 2A |n·d|``: ``15u (E² / A) (D + t ‖d‖∞) / |n·d|``; the reciprocal and the product,
-``2u t``.
+against ``det = 2A |n·d|``: ``15u (E² / A) (D + t ‖d‖∞) / |n·d|``, with ``ρ = 15u (E² / A) ‖d‖∞ /
+|n·d|``; the reciprocal and the product, ``2u t``.
 
 **The geometric test** (``geometric``): ``e1``, ``e2`` rounded move ``b``, ``c``: ``u ‖n‖₁ E``.
 ``N = e1 × e2`` errs by ``4u E²`` per component, which turns the plane about ``a``: ``δN·(a − p) /
 (N·d)`` with ``|a − p| ≤ E``, at most ``6u E³ / (A |n·d|)``.  ``a − o`` rounded moves ``a``:
 ``u ‖n‖₁ D``; the dot products ``N·(a − o)`` and ``N·d`` err by ``3u ‖n‖₁ D`` and ``3u t ‖n‖₁ ‖d‖∞``
-over ``|n·d|``; the division, ``u t``.
+over ``|n·d|``, with ``ρ = 3u ‖n‖₁ ‖d‖∞ / |n·d|``; the division, ``u t``.
 
 **Mapping the ray into object space** (the library): the stored inverse ``[X̂ | b̂]`` is the
 exact ``[X | b]`` rounded once to float64 (``raycore.mesh.affine_inverse``) and then to the
@@ -70,13 +74,13 @@ float64 is within ``4 · 2^-53 (|L| |v| + |m|)``, then rounded to the scene's pr
 import numpy as np
 
 #: Per test, the coefficients of the bound on ``|t̂ − t|`` derived above, in units of u:
-#: ``[‖n‖₁ (cD D + cE E + ct t ‖d‖∞) + (E² / A) (c3 E + cM (D + t ‖d‖∞))] / |n·d|
-#: + cz D / ‖d‖∞ + cT t``.
+#: ``{[‖n‖₁ (cD D + cE E + ct t ‖d‖∞) + (E² / A) (c3 E + cM (D + t ‖d‖∞))] / |n·d|
+#: + cz D / ‖d‖∞ + cT t} / (1 − ρ)`` with ``ρ = u (rG E² / A + rn ‖n‖₁) ‖d‖∞ / |n·d|``.
 COEFFICIENTS = {
-    #             cD cE ct  c3  cM cz cT
-    "watertight": (4, 0, 1, 48, 0, 8, 0),
-    "moller": (1, 1, 0, 0, 15, 0, 2),
-    "geometric": (4, 1, 3, 6, 0, 0, 1),
+    #             cD cE ct  c3  cM cz cT  rG rn
+    "watertight": (4, 0, 1, 48, 0, 8, 0, 24, 0),
+    "moller": (1, 1, 0, 0, 15, 0, 2, 15, 0),
+    "geometric": (4, 1, 3, 6, 0, 0, 1, 0, 3),
 }
 
 
@@ -110,17 +114,21 @@ def triangle_t_bound(test, u, origins, directions, corners, t):
     """(H,) bound on the rounding error of ``t`` of ray/triangle ``test`` computing with unit
     roundoff ``u``, for hits ``t`` of rays ``origins``, ``directions`` (H, 3) on triangles
     ``corners`` (H, 3, 3), all as the computation sees them (see the module's docstring)."""
-    c_d, c_e, c_t, c_3, c_m, c_z, c_t_flat = COEFFICIENTS[test]
+    c_d, c_e, c_t, c_3, c_m, c_z, c_t_flat, r_g, r_n = COEFFICIENTS[test]
     normal, area, edge = _plane(corners)
     reach = np.abs(corners - origins[:, None]).max(axis=(1, 2))  # D
-    along = np.abs(t) * np.abs(directions).max(axis=1)  # t ‖d‖∞
+    longest = np.abs(directions).max(axis=1)  # ‖d‖∞
+    along = np.abs(t) * longest  # t ‖d‖∞
     l1 = np.abs(normal).sum(axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
+        shape = edge**2 / area  # E² / A
+        facing = np.abs(_dot(normal, directions))  # |n·d|
         lengths = (l1 * (c_d * reach + c_e * edge + c_t * along)
-                   + edge**2 / area * (c_3 * edge + c_m * (reach + along)))
-        bound = (lengths / np.abs(_dot(normal, directions))
-                 + c_z * reach / np.abs(directions).max(axis=1) + c_t_flat * np.abs(t))
-    return u * np.where(np.isnan(bound), np.inf, bound)
+                   + shape * (c_3 * edge + c_m * (reach + along)))
+        bound = u * (lengths / facing + c_z * reach / longest + c_t_flat * np.abs(t))
+        rho = u * (r_g * shape + r_n * l1) * longest / facing
+        bound = np.where(rho < 1, bound / (1 - rho), np.inf)
+    return np.where(np.isnan(bound), np.inf, bound)
 
 
 def library_instance_bound(test, dtype, origins, directions, t, vertices, transforms):
