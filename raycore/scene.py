@@ -17,7 +17,7 @@ from raycore.bvh.record import SceneRecord
 from raycore.bvh.simd import BLOCK
 from raycore.bvh.traverse import MESH
 from raycore.hits import SURFACE_FIELDS, AllHits, Hits
-from raycore.mesh import Mesh, validate_transform
+from raycore.mesh import Mesh, affine_inverse, affine_product, validate_transform
 from raycore.primitives import analytic, box, cone, cylinder, disk, plane, sphere
 from raycore.primitives.triangle import WATERTIGHT, triangle_test_code
 from raycore.rays import as_float_array, ray_arrays, refuse, resolve_dtype
@@ -123,9 +123,10 @@ class Scene:
             raise ValueError(f"geom_id must be the id of a mesh in this scene, got {geom_id!r}")
         matrix = validate_transform(transform)
         if geom_id in self._placement:
-            matrix = matrix @ self._placement[geom_id][0]
+            matrix = affine_product(matrix, self._placement[geom_id][0])
         mesh_index = self._mesh_of[geom_id]
-        inverse = self._fits(np.linalg.inv(matrix)[:3], "transform (its inverse)")
+        # rounded once from the exact inverse: the same bits on every CPU, unlike np.linalg.inv
+        inverse = self._fits(affine_inverse(matrix), "transform (its inverse)")
         obj = self._add_object(MESH, mesh=mesh_index, xform=inverse)
         self._placement[obj] = (matrix, self._meshes[mesh_index].transformed_bounds(matrix))
         return obj

@@ -44,7 +44,9 @@ def as_radius(value, name="radius"):
 
 def as_unit(vector, name, message="must be non-zero"):
     """Return ``vector / |vector|`` and its length; raise ``ValueError`` naming ``name`` if zero."""
-    length = float(np.linalg.norm(vector))
+    # not np.linalg.norm: its dot product runs an OpenBLAS kernel whose last bit depends on the CPU
+    x, y, z = np.asarray(vector, np.float64).tolist()
+    length = math.sqrt((x * x + y * y) + z * z)
     if not (length > 0 and math.isfinite(length)):
         raise ValueError(f"{name} {message}")
     return vector / length, length

@@ -31,6 +31,7 @@ axis ``(k + 2) % 3`` (local axes for the transformed box).
 import numpy as np
 
 from raycore._fp import gamma, like
+from raycore.mesh import affine_inverse, condition_number, transform_points
 from raycore.primitives._common import (
     as_point,
     clamp01,
@@ -43,8 +44,8 @@ from raycore.primitives._common import (
 )
 from raycore.rays import as_float_array
 
-#: Largest condition number accepted for a transform's linear part: beyond it, float32 rays in
-#: the local frame would carry no correct digit.
+#: Largest condition number (:func:`raycore.mesh.condition_number`) accepted for a transform's
+#: linear part: beyond it, float32 rays in the local frame would carry no correct digit.
 MAX_CONDITION = 2.0**23
 
 
@@ -96,12 +97,10 @@ def pack_transformed(lo, hi, transform):
     matrix = as_float_array(transform, "transform", np.float64, (4, 4))
     if not np.array_equal(matrix[3], [0.0, 0.0, 0.0, 1.0]):
         raise ValueError(f"transform must be affine (last row [0, 0, 0, 1]), got {matrix[3]}")
-    linear = matrix[:3, :3]
-    if not np.linalg.cond(linear) < MAX_CONDITION:
+    if not condition_number(matrix[:3, :3]) < MAX_CONDITION:
         raise ValueError("transform must be invertible: its linear part is singular or nearly so")
-    inverse = np.linalg.inv(linear)
-    to_local = np.hstack([inverse, -(inverse @ matrix[:3, 3:])])
-    return param_row(box[:6], to_local.ravel())
+    # rounded once from the exact inverse: the same bits on every CPU, unlike np.linalg.inv
+    return param_row(box[:6], affine_inverse(matrix).ravel())
 
 
 def bounds(params):
@@ -113,13 +112,15 @@ def bounds(params):
 def bounds_transformed(params):
     """Bounds of the eight transformed corners, ``(lo, hi)``, two (3,) float64 arrays."""
     params = np.asarray(params, dtype=np.float64)
-    to_local = params[6:18].reshape(3, 4)
-    linear = np.linalg.inv(to_local[:, :3])
-    offset = -linear @ to_local[:, 3]
+    # the kernels test the box that the stored world -> local map sends to [lo, hi]: its exact
+    # inverse, rounded once
+    to_world = affine_inverse(params[6:18].reshape(3, 4))
     corners = np.array(np.meshgrid(*zip(params[:3], params[3:6], strict=True), indexing="ij"))
-    corners = corners.reshape(3, 8)
-    world = linear @ corners + offset[:, None]
-    return widen(world.min(axis=1), world.max(axis=1))
+    corners = corners.reshape(3, 8).T
+    world = transform_points(to_world, corners)
+    # each coordinate is within γ(4)·(|L| |c| + |t|) of the exact corner's
+    slack = gamma(4, 1.0) * transform_points(np.abs(to_world), np.abs(corners)).max(axis=0)
+    return widen(world.min(axis=0) - slack, world.max(axis=0) + slack)
 
 
 @inline_kernel

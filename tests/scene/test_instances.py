@@ -7,7 +7,8 @@ import trimesh
 
 from raycore import Scene
 
-from .brute import MESH_DIR, SceneSpec, eps, random_affine, shared_mesh, unit
+from .brute import MESH_DIR, SceneSpec, apply_affine, random_affine, shared_mesh, unit
+from .t_error import instance_tolerance
 
 
 def placements(count, seed=0):
@@ -17,7 +18,7 @@ def placements(count, seed=0):
 
 def flattened(vertices, faces, transforms):
     """One mesh holding every placement: vertices mapped in float64, faces offset."""
-    world = [vertices @ m[:3, :3].T + m[:3, 3] for m in transforms]
+    world = [apply_affine(m, vertices) for m in transforms]
     return np.concatenate(world), np.concatenate([faces + i * len(vertices)
                                                  for i in range(len(transforms))])
 
@@ -37,6 +38,20 @@ def rays(count, transforms, seed=1, reach=20.0):
     centres = np.array([m[:3, 3] for m in transforms])
     aim = centres[rng.integers(0, len(centres), count)] + rng.normal(scale=1.2, size=(count, 3))
     return origins, aim - origins
+
+
+def tolerance(dtype, origins, directions, t, placements, block, prim):
+    """:func:`t_error.instance_tolerance` of the watertight test on triangle ``prim[i]`` of
+    placement ``block[i]``, for each ray; ``placements`` lists ``(vertices, faces, transform)``.
+    """
+    corners = np.empty((len(block), 3, 3))
+    transforms = np.empty((len(block), 4, 4))
+    for k, (vertices, faces, transform) in enumerate(placements):
+        rows = np.flatnonzero(block == k)
+        corners[rows] = vertices[faces[prim[rows]]]
+        transforms[rows] = transform
+    seen = [x.astype(dtype).astype(np.float64) for x in (origins, directions)]
+    return instance_tolerance("watertight", dtype, *seen, t, corners, transforms)
 
 
 @pytest.mark.parametrize("shape", ["icosphere", "capsule", "soup"])
@@ -65,18 +80,21 @@ def test_instances_answer_as_the_flattened_mesh(dtype, shape):
     # geometry ids map: instance k (id k + 1, after the prototype) <-> faces of block k
     f = len(faces)
     hit = b.geom_id >= 0
-    e = eps(dtype)
-    reach = (np.linalg.norm(origins, axis=1) + 25.0) / np.linalg.norm(directions, axis=1)
-    tol = 16 * e * (np.abs(b.t) + reach)
-    second = np.full(len(origins), np.inf)
-    two = crossings.counts >= 2
-    second[two] = crossings.t[crossings.offsets[:-1][two] + 1]
-    with np.errstate(invalid="ignore"):  # inf - inf on misses
-        clear = second - b.t > 2 * tol
     bad = (a.geom_id >= 0) != hit
-    both = hit & (a.geom_id >= 0)
-    bad[both] |= np.abs(a.t[both] - b.t[both]) > tol[both]
-    ids = both & clear
+    both = np.flatnonzero(hit & (a.geom_id >= 0))
+    # t: the instanced scene reports triangle A, the flattened one B; each found the other's
+    # triangle no closer, so |a.t - b.t| <= the larger of their tolerances (t_error.py)
+    placed = [(vertices, faces, m) for m in transforms]
+    tol_a, tol_b = (tolerance(dtype, origins[both], directions[both], b.t[both], placed, block,
+                              prim)
+                    for block, prim in [(a.geom_id[both] - 1, a.prim_id[both]),
+                                        (b.prim_id[both] // f, b.prim_id[both] % f)])
+    bad[both] |= np.abs(a.t[both] - b.t[both]) > np.maximum(tol_a, tol_b)
+    # ids: the same triangle, unless another crossing lies within both tolerances
+    second = np.full(len(both), np.inf)
+    two = crossings.counts[both] >= 2
+    second[two] = crossings.t[crossings.offsets[:-1][both[two]] + 1]
+    ids = both[second - b.t[both] > tol_a + tol_b]
     bad[ids] |= (a.geom_id[ids] != b.prim_id[ids] // f + 1) | (a.prim_id[ids] != b.prim_id[ids] % f)
     # rays within rounding of an instance's edge may differ (object- vs world-space tests)
     rays_bad = np.flatnonzero(bad)
@@ -84,7 +102,8 @@ def test_instances_answer_as_the_flattened_mesh(dtype, shape):
     assert excused.all(), f"rays {rays_bad[~excused][:5]} differ"
     assert len(rays_bad) <= 0.01 * len(origins)
     # normals: the same up to rounding, where the same triangle is hit
-    same = both & (a.geom_id == b.prim_id // f + 1) & (a.prim_id == b.prim_id % f)
+    same = both[(a.geom_id[both] == b.prim_id[both] // f + 1)
+                & (a.prim_id[both] == b.prim_id[both] % f)]
     limit = 1e-4 if dtype == "float32" else 1e-10
     assert np.abs(a.normal[same] - b.normal[same]).max() <= limit
     # all hits and counts
@@ -147,10 +166,30 @@ def test_from_trimesh_scene_turns_repeated_geometry_into_instances(dtype):
     b = flat.intersect(origins, directions)
     assert 0.05 < (b.geom_id >= 0).mean() < 0.95
     assert len(np.unique(a.geom_id[a.geom_id >= 0])) == 8
-    tol = 16 * eps(dtype) * (np.abs(b.t) + 40.0)
+    # to_mesh concatenates the placements in the graph's order (checked here): face i of the
+    # flattened mesh is face i - start[k] of placement k
+    placed = []
+    for node in tscene.graph.nodes_geometry:
+        matrix, name = tscene.graph[node]
+        placed.append((tscene.geometry[name].vertices, tscene.geometry[name].faces, matrix))
+    start = np.cumsum([0] + [len(faces) for _, faces, _ in placed])
+    for (vertices, faces, matrix), first in zip(placed, start, strict=False):
+        got = flat_mesh.vertices[flat_mesh.faces[first:first + len(faces)]]
+        assert np.allclose(got, apply_affine(matrix, vertices)[faces], rtol=0, atol=1e-12)
     bad = (a.geom_id >= 0) != (b.geom_id >= 0)
-    both = (a.geom_id >= 0) & (b.geom_id >= 0)
-    bad[both] |= np.abs(a.t[both] - b.t[both]) > tol[both]
+    both = np.flatnonzero((a.geom_id >= 0) & (b.geom_id >= 0))
+    # t: |a.t - b.t| <= the larger tolerance of the two triangles hit (t_error.py); which
+    # placement the library hit is not known here, so its tolerance is the largest over the
+    # placements that have its triangle
+    flat_block = np.searchsorted(start, b.prim_id[both], side="right") - 1
+    tol = tolerance(dtype, origins[both], directions[both], b.t[both], placed, flat_block,
+                    b.prim_id[both] - start[flat_block])
+    for k, (_, faces, _) in enumerate(placed):
+        has = np.flatnonzero(a.prim_id[both] < len(faces))
+        tol[has] = np.maximum(tol[has], tolerance(
+            dtype, origins[both[has]], directions[both[has]], b.t[both[has]], placed,
+            np.full(len(has), k), a.prim_id[both[has]]))
+    bad[both] |= np.abs(a.t[both] - b.t[both]) > tol
     # the same placements as instances, to excuse rays within rounding of an edge
     spec = SceneSpec()
     protos = {"ico": spec.mesh(ico.vertices, ico.faces, visible=False),
