@@ -17,9 +17,18 @@ scene keeps conservative boxes at half the memory.
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-from raycore.bvh.build import BuildParams, build_binary_bvh
+from raycore.bvh.build import (
+    BINARY_COUNT,
+    BINARY_REF,
+    FLOAT32_MAX,
+    MAX_DEPTH,
+    PRIM_INDEX,
+    BuildParams,
+    build_binary_bvh,
+    records_from_bounds,
+)
 
 WIDTH = 8
 NODE_WIDTH = 8 * WIDTH
@@ -62,114 +71,183 @@ class BVH:
         return self.nodes.nbytes + self.order.nbytes
 
 
-def round_outwards(lo, hi):
-    """Round float64 bounds to float32 so that the float32 box contains the float64 one."""
-    lo32 = lo.astype(np.float32)
-    hi32 = hi.astype(np.float32)
-    lo32 = np.where(lo32 > lo, np.nextafter(lo32, np.float32(-np.inf)), lo32)
-    hi32 = np.where(hi32 < hi, np.nextafter(hi32, np.float32(np.inf)), hi32)
-    return lo32, hi32
-
-
-def _half_areas(lo, hi):
-    extent = np.maximum(hi - lo, 0.0)
-    return extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] + extent[:, 2] * extent[:, 0]
+@njit(cache=True, inline="always")
+def _half_area(nodes, node):
+    box = nodes[node]
+    dx = np.float64(box[3]) - np.float64(box[0])
+    dy = np.float64(box[4]) - np.float64(box[1])
+    dz = np.float64(box[5]) - np.float64(box[2])
+    return dx * dy + dy * dz + dz * dx
 
 
 @njit(cache=True)
-def _collapse(left, right, areas):
+def _collapse(nodes, refs, capacity):
     """Group binary nodes into wide nodes of up to WIDTH children.
 
     From each wide node's binary node, the child of largest surface area that is an internal
     node is replaced by its two children until there are WIDTH of them (or only leaves).
 
+    Parameters
+    ----------
+    nodes, refs : ndarray, shape (M, BINARY_WIDTH)
+        Binary node records (float32 and their int32 view), from ``build_binary_bvh``.
+    capacity : int
+        At least the number of wide nodes (the primitive count will do).
+
     Returns
     -------
-    children : ndarray of int64, shape (K, WIDTH)
+    children : ndarray of int32, shape (capacity, WIDTH)
         Binary node of each child slot, -1 where unused; row 0 is the root.
-    child_row : ndarray of int64, shape (K, WIDTH)
-        Wide row of each internal child (0 elsewhere).
+    child_row : ndarray of int32, shape (capacity, WIDTH)
+        Wide row of each internal child.
+    rows : int
+        Wide nodes made: rows past it are unwritten.
     """
-    n = len(left)
-    children = np.full((max(n, 1), WIDTH), -1, np.int64)
-    child_row = np.zeros((max(n, 1), WIDTH), np.int64)
-    source = np.empty(max(n, 1), np.int64)  # binary node of each wide row
+    children = np.empty((capacity, WIDTH), np.int32)
+    child_row = np.empty((capacity, WIDTH), np.int32)
+    source = np.empty(capacity, np.int32)  # binary node of each wide row
     source[0] = 0
     rows = 1
     row = 0
     while row < rows:
         node = source[row]
-        if left[node] < 0:
+        children[row] = -1
+        child_row[row] = 0
+        if refs[node, BINARY_COUNT] > 0:
             # a root leaf: a wide node with one child
             children[row, 0] = node
             row += 1
             continue
-        children[row, 0] = left[node]
-        children[row, 1] = right[node]
+        children[row, 0] = refs[node, BINARY_REF]
+        children[row, 1] = refs[node, BINARY_REF] + 1
         size = 2
         while size < WIDTH:
             widest = -1
+            widest_area = 0.0
             for slot in range(size):
                 child = children[row, slot]
-                if left[child] >= 0 and (widest < 0 or areas[child] > areas[children[row, widest]]):
-                    widest = slot
+                if refs[child, BINARY_COUNT] == 0:
+                    area = _half_area(nodes, child)
+                    if widest < 0 or area > widest_area:
+                        widest = slot
+                        widest_area = area
             if widest < 0:
                 break
             child = children[row, widest]
-            children[row, widest] = left[child]
-            children[row, size] = right[child]
+            children[row, widest] = refs[child, BINARY_REF]
+            children[row, size] = refs[child, BINARY_REF] + 1
             size += 1
         for slot in range(size):
             child = children[row, slot]
-            if left[child] >= 0:
+            if refs[child, BINARY_COUNT] == 0:
                 source[rows] = child
                 child_row[row, slot] = rows
                 rows += 1
         row += 1
-    return children[:rows].copy(), child_row[:rows].copy()
+    return children, child_row, rows
+
+
+@njit(cache=True, parallel=True)
+def _wide_nodes(nodes, refs, children, child_row, rows):
+    """Wide rows (rows, NODE_WIDTH) float32 from the collapsed tree.  A box that reaches the
+    clamp of the primitive records (+-FLOAT32_MAX) is widened to infinity there, so that it still
+    contains a primitive beyond float32's range."""
+    wide = np.empty((rows, NODE_WIDTH), np.float32)
+    wide_refs = wide.view(np.int32)
+    for row in prange(rows):
+        for slot in range(WIDTH):
+            child = children[row, slot]
+            if child < 0:
+                for axis in range(3):
+                    wide[row, axis * WIDTH + slot] = np.inf
+                    wide[row, (axis + 3) * WIDTH + slot] = -np.inf
+                wide_refs[row, REFS + slot] = 0
+                wide_refs[row, COUNTS + slot] = 0
+                continue
+            for axis in range(3):
+                lo = nodes[child, axis]
+                hi = nodes[child, 3 + axis]
+                wide[row, axis * WIDTH + slot] = -np.inf if lo == -FLOAT32_MAX else lo
+                wide[row, (axis + 3) * WIDTH + slot] = np.inf if hi == FLOAT32_MAX else hi
+            count = refs[child, BINARY_COUNT]
+            wide_refs[row, REFS + slot] = refs[child, BINARY_REF] if count > 0 else child_row[
+                row, slot]
+            wide_refs[row, COUNTS + slot] = count
+    return wide
+
+
+@njit(cache=True)
+def _tree_stats(nodes, refs, traversal_cost, intersection_cost):
+    """(sah_cost, node_count, leaf_count) of the binary tree, walked from the root."""
+    stack = np.empty(MAX_DEPTH + 2, np.int64)
+    stack[0] = 0
+    top = 1
+    internal_area = 0.0
+    leaf_area = 0.0
+    node_count = 0
+    leaf_count = 0
+    while top > 0:
+        top -= 1
+        node = stack[top]
+        node_count += 1
+        count = refs[node, BINARY_COUNT]
+        if count > 0:
+            leaf_count += 1
+            leaf_area += _half_area(nodes, node) * count
+        else:
+            internal_area += _half_area(nodes, node)
+            stack[top] = refs[node, BINARY_REF]
+            stack[top + 1] = refs[node, BINARY_REF] + 1
+            top += 2
+    root_area = _half_area(nodes, 0)
+    if not root_area > 0:
+        root_area = 1.0
+    sah = (traversal_cost * internal_area + intersection_cost * leaf_area) / root_area
+    return sah, node_count, leaf_count
+
+
+def build_bvh_from_records(prims, lo, hi, params=None):
+    """Build a flat BVH over primitive records (see :func:`raycore.bvh.build.records_from_bounds`),
+    which are left in leaf order.
+
+    Parameters
+    ----------
+    prims : ndarray of float32, shape (F, PRIM_WIDTH)
+    lo, hi : ndarray of float64, shape (3,)
+        Bounds of everything, reported as the BVH's.
+    params : BuildParams, optional
+    """
+    params = params or BuildParams()
+    if len(prims) == 0:
+        raise ValueError("cannot build a BVH over zero primitives")
+    binary, depth = build_binary_bvh(
+        prims, int(params.bins), int(params.max_leaf_size), float(params.traversal_cost),
+        float(params.intersection_cost))
+    binary_refs = binary.view(np.int32)
+    sah_cost, node_count, leaf_count = _tree_stats(
+        binary, binary_refs, float(params.traversal_cost), float(params.intersection_cost))
+    children, child_row, rows = _collapse(binary, binary_refs, len(prims))
+    nodes = _wide_nodes(binary, binary_refs, children, child_row, rows)
+    del binary, binary_refs, children, child_row
+    return BVH(
+        nodes=nodes,
+        refs=nodes.view(np.int32),
+        order=prims.view(np.int32)[:, PRIM_INDEX].astype(np.int64),
+        lo=np.asarray(lo, np.float64).copy(),
+        hi=np.asarray(hi, np.float64).copy(),
+        depth=int(depth),
+        node_count=int(node_count),
+        leaf_count=int(leaf_count),
+        sah_cost=float(sah_cost),
+    )
 
 
 def build_bvh(lo, hi, params=None):
-    """Build a flat BVH over primitives with bounds ``lo``, ``hi`` (float64, shape (F, 3)),
+    """Build a flat BVH over primitives with bounds ``lo``, ``hi`` (float, shape (F, 3)),
     with :class:`BuildParams` (defaults when None)."""
-    params = params or BuildParams()
     lo = np.ascontiguousarray(lo, dtype=np.float64)
     hi = np.ascontiguousarray(hi, dtype=np.float64)
     if len(lo) == 0:
         raise ValueError("cannot build a BVH over zero primitives")
-    order, node_lo, node_hi, left, right, first, count, depth = build_binary_bvh(
-        lo, hi, int(params.bins), int(params.max_leaf_size),
-        float(params.traversal_cost), float(params.intersection_cost),
-    )
-    is_leaf = count > 0
-    areas = _half_areas(node_lo, node_hi)
-    root_area = areas[0] if areas[0] > 0 else 1.0
-    sah_cost = float(
-        (params.traversal_cost * areas[~is_leaf].sum()
-         + params.intersection_cost * (areas[is_leaf] * count[is_leaf]).sum()) / root_area
-    )
-
-    box_lo, box_hi = round_outwards(node_lo, node_hi)
-    children, child_row = _collapse(left, right, areas)
-    rows = len(children)
-    nodes = np.zeros((rows, NODE_WIDTH), np.float32)
-    refs = nodes.view(np.int32)
-    real = children >= 0
-    c = np.where(real, children, 0)
-    for axis in range(3):
-        nodes[:, axis * WIDTH:(axis + 1) * WIDTH] = np.where(real, box_lo[c, axis], np.inf)
-        nodes[:, (axis + 3) * WIDTH:(axis + 4) * WIDTH] = np.where(real, box_hi[c, axis], -np.inf)
-    leaf = real & is_leaf[c]
-    refs[:, REFS:REFS + WIDTH] = np.where(leaf, first[c], np.where(real, child_row, 0))
-    refs[:, COUNTS:COUNTS + WIDTH] = np.where(leaf, count[c], 0)
-    return BVH(
-        nodes=nodes,
-        refs=refs,
-        order=order,
-        lo=node_lo[0].copy(),
-        hi=node_hi[0].copy(),
-        depth=int(depth),
-        node_count=int(len(node_lo)),
-        leaf_count=int(is_leaf.sum()),
-        sah_cost=sah_cost,
-    )
+    return build_bvh_from_records(records_from_bounds(lo, hi), lo.min(axis=0), hi.max(axis=0),
+                                  params)
