@@ -17,13 +17,12 @@ scene keeps conservative boxes at half the memory.
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, parallel_chunksize, prange
 
 from raycore.bvh.build import (
     BINARY_COUNT,
     BINARY_REF,
     FLOAT32_MAX,
-    MAX_DEPTH,
     PRIM_INDEX,
     BuildParams,
     build_binary_bvh,
@@ -80,52 +79,76 @@ def _half_area(nodes, node):
     return dx * dy + dy * dz + dz * dx
 
 
+#: Fields of a collapse's tree statistics (float64): summed half-areas of internal nodes and of
+#: leaves times their sizes, node count, leaf count.
+INTERNAL_AREA, LEAF_AREA, NODE_COUNT, LEAF_COUNT = range(4)
+
+
+@njit(cache=True, inline="always")
+def _count_node(refs, nodes, node, stats):
+    count = refs[node, BINARY_COUNT]
+    area = _half_area(nodes, node)
+    stats[NODE_COUNT] += 1
+    if count > 0:
+        stats[LEAF_AREA] += area * count
+        stats[LEAF_COUNT] += 1
+    else:
+        stats[INTERNAL_AREA] += area
+
+
 @njit(cache=True)
-def _collapse(nodes, refs, capacity):
-    """Group binary nodes into wide nodes of up to WIDTH children.
+def _collapse(nodes, refs, root, first_row, top_count, deferred, deferred_rows, queue, wide,
+              write, count_root, stats):
+    """Group the binary nodes below ``root`` into wide nodes of up to WIDTH children, breadth
+    first, as rows ``first_row, first_row + 1, ...`` of ``wide``.
 
     From each wide node's binary node, the child of largest surface area that is an internal
-    node is replaced by its two children until there are WIDTH of them (or only leaves).
+    node is replaced by its two children until there are WIDTH of them (or only leaves).  A
+    row depends only on its binary node, so the top of the tree (``top_count`` > 0) can leave
+    the rows of binary nodes past the top records (``>= top_count``) to collapses of their own,
+    run beside each other: such a node is listed in ``deferred``, and its row taken from
+    ``deferred_rows`` in the same order.
 
     Parameters
     ----------
     nodes, refs : ndarray, shape (M, BINARY_WIDTH)
-        Binary node records (float32 and their int32 view), from ``build_binary_bvh``.
-    capacity : int
-        At least the number of wide nodes (the primitive count will do).
+        Binary node records (float32 and their int32 view).
+    queue : ndarray of int64
+        Scratch, at least as long as the rows made.
+    wide : ndarray of float32, shape (K, NODE_WIDTH)
+        Written only when ``write``: a first call counts rows, a second fills them.
+    count_root : bool
+        Whether ``root`` itself adds to ``stats`` (the tree statistics, see INTERNAL_AREA), to
+        which every node placed in a slot adds.
 
     Returns
     -------
-    children : ndarray of int32, shape (capacity, WIDTH)
-        Binary node of each child slot, -1 where unused; row 0 is the root.
-    child_row : ndarray of int32, shape (capacity, WIDTH)
-        Wide row of each internal child.
-    rows : int
-        Wide nodes made: rows past it are unwritten.
+    rows, deferred_count : int
     """
-    children = np.empty((capacity, WIDTH), np.int32)
-    child_row = np.empty((capacity, WIDTH), np.int32)
-    source = np.empty(capacity, np.int32)  # binary node of each wide row
-    source[0] = 0
+    wide_refs = wide.view(np.int32)
+    slots = np.empty(WIDTH, np.int64)
+    slot_row = np.empty(WIDTH, np.int64)
+    if count_root:
+        _count_node(refs, nodes, root, stats)
+    queue[0] = root
     rows = 1
     row = 0
+    deferred_count = 0
     while row < rows:
-        node = source[row]
-        children[row] = -1
-        child_row[row] = 0
-        if refs[node, BINARY_COUNT] > 0:
-            # a root leaf: a wide node with one child
-            children[row, 0] = node
-            row += 1
-            continue
-        children[row, 0] = refs[node, BINARY_REF]
-        children[row, 1] = refs[node, BINARY_REF] + 1
-        size = 2
+        node = queue[row]
+        size = 1
+        slots[0] = node  # a root leaf: a wide node with one child
+        if refs[node, BINARY_COUNT] == 0:
+            slots[0] = refs[node, BINARY_REF]
+            slots[1] = refs[node, BINARY_REF] + 1
+            _count_node(refs, nodes, slots[0], stats)
+            _count_node(refs, nodes, slots[1], stats)
+            size = 2
         while size < WIDTH:
             widest = -1
             widest_area = 0.0
             for slot in range(size):
-                child = children[row, slot]
+                child = slots[slot]
                 if refs[child, BINARY_COUNT] == 0:
                     area = _half_area(nodes, child)
                     if widest < 0 or area > widest_area:
@@ -133,77 +156,118 @@ def _collapse(nodes, refs, capacity):
                         widest_area = area
             if widest < 0:
                 break
-            child = children[row, widest]
-            children[row, widest] = refs[child, BINARY_REF]
-            children[row, size] = refs[child, BINARY_REF] + 1
+            child = slots[widest]
+            slots[widest] = refs[child, BINARY_REF]
+            slots[size] = refs[child, BINARY_REF] + 1
+            _count_node(refs, nodes, slots[widest], stats)
+            _count_node(refs, nodes, slots[size], stats)
             size += 1
         for slot in range(size):
-            child = children[row, slot]
-            if refs[child, BINARY_COUNT] == 0:
-                source[rows] = child
-                child_row[row, slot] = rows
+            child = slots[slot]
+            if refs[child, BINARY_COUNT] > 0 or node == child:
+                continue
+            if top_count > 0 and child >= top_count:
+                if write:
+                    slot_row[slot] = deferred_rows[deferred_count]
+                else:
+                    deferred[deferred_count] = child
+                deferred_count += 1
+            else:
+                queue[rows] = child
+                slot_row[slot] = first_row + rows
                 rows += 1
+        if write:
+            _write_row(nodes, refs, wide, wide_refs, first_row + row, slots, slot_row, size)
         row += 1
-    return children, child_row, rows
+    return rows, deferred_count
+
+
+@njit(cache=True, inline="always")
+def _write_row(nodes, refs, wide, wide_refs, row, slots, slot_row, size):
+    """Wide row ``row`` from binary nodes ``slots[:size]``.  A box that reaches the clamp of the
+    primitive records (+-FLOAT32_MAX) is widened to infinity, so that it still contains a
+    primitive beyond float32's range."""
+    for slot in range(WIDTH):
+        if slot >= size:
+            for axis in range(3):
+                wide[row, axis * WIDTH + slot] = np.inf
+                wide[row, (axis + 3) * WIDTH + slot] = -np.inf
+            wide_refs[row, REFS + slot] = 0
+            wide_refs[row, COUNTS + slot] = 0
+            continue
+        child = slots[slot]
+        for axis in range(3):
+            lo = nodes[child, axis]
+            hi = nodes[child, 3 + axis]
+            wide[row, axis * WIDTH + slot] = -np.inf if lo == -FLOAT32_MAX else lo
+            wide[row, (axis + 3) * WIDTH + slot] = np.inf if hi == FLOAT32_MAX else hi
+        count = refs[child, BINARY_COUNT]
+        wide_refs[row, REFS + slot] = refs[child, BINARY_REF] if count > 0 else slot_row[slot]
+        wide_refs[row, COUNTS + slot] = count
 
 
 @njit(cache=True, parallel=True)
-def _wide_nodes(nodes, refs, children, child_row, rows):
-    """Wide rows (rows, NODE_WIDTH) float32 from the collapsed tree.  A box that reaches the
-    clamp of the primitive records (+-FLOAT32_MAX) is widened to infinity there, so that it still
-    contains a primitive beyond float32's range."""
-    wide = np.empty((rows, NODE_WIDTH), np.float32)
-    wide_refs = wide.view(np.int32)
-    for row in prange(rows):
-        for slot in range(WIDTH):
-            child = children[row, slot]
-            if child < 0:
-                for axis in range(3):
-                    wide[row, axis * WIDTH + slot] = np.inf
-                    wide[row, (axis + 3) * WIDTH + slot] = -np.inf
-                wide_refs[row, REFS + slot] = 0
-                wide_refs[row, COUNTS + slot] = 0
-                continue
-            for axis in range(3):
-                lo = nodes[child, axis]
-                hi = nodes[child, 3 + axis]
-                wide[row, axis * WIDTH + slot] = -np.inf if lo == -FLOAT32_MAX else lo
-                wide[row, (axis + 3) * WIDTH + slot] = np.inf if hi == FLOAT32_MAX else hi
-            count = refs[child, BINARY_COUNT]
-            wide_refs[row, REFS + slot] = refs[child, BINARY_REF] if count > 0 else child_row[
-                row, slot]
-            wide_refs[row, COUNTS + slot] = count
-    return wide
+def _collapse_subtrees(nodes, refs, roots, queue_size, first_rows, wide, write, stats, rows):
+    """:func:`_collapse` below each of ``roots`` on all cores; ``stats`` (T, 4) and ``rows``
+    (T,) receive each one's figures.  ``queue_size`` bounds any one's rows."""
+    none = np.empty(0, np.int64)
+    for t in prange(len(roots)):
+        queue = np.empty(queue_size, np.int64)
+        own = np.zeros(4)  # not a row of stats, which neighbouring subtrees' threads share
+        rows[t], _ = _collapse(nodes, refs, roots[t], first_rows[t], 0, none, none, queue, wide,
+                               write, False, own)
+        stats[t] = own
+
+
+def _wide_layout(binary, prim_count):
+    """Collapse a :class:`~raycore.bvh.build.BinaryBVH` into wide rows: (nodes, stats), with
+    stats the tree statistics (see INTERNAL_AREA), summed in an order that does not depend on
+    the number of threads.
+
+    The top of the tree is collapsed first; the rows below it, inside the subtrees that were
+    built in parallel, are then collapsed in parallel too, each group after the rows before it.
+    Every collapse runs twice, counting rows and then filling them, so that the rows need no
+    room beyond their own.
+    """
+    nodes = binary.nodes
+    refs = nodes.view(np.int32)
+    empty = np.empty((0, NODE_WIDTH), np.float32)
+    none = np.empty(0, np.int64)
+    stats = np.zeros(4)
+    if binary.top_count == 1:
+        # one subtree, the whole tree
+        queue = np.empty(max(prim_count, 1), np.int64)
+        rows, _ = _collapse(nodes, refs, 0, 0, 0, none, none, queue, empty, False, True, stats)
+        wide = _new_rows(rows)
+        _collapse(nodes, refs, 0, 0, 0, none, none, queue, wide, True, True, np.zeros(4))
+        return wide, stats
+    queue = np.empty(binary.top_count, np.int64)
+    deferred = np.empty(WIDTH * binary.top_count, np.int64)
+    top_rows, count = _collapse(nodes, refs, 0, 0, binary.top_count, deferred, none, queue,
+                                empty, False, True, stats)
+    deferred = deferred[:count]
+    # a subtree over m primitives has at most m - 1 internal nodes, one per wide row
+    queue_size = binary.largest_subtree
+    sub_stats = np.empty((count, 4))
+    sub_rows = np.empty(count, np.int64)
+    with parallel_chunksize(1):
+        _collapse_subtrees(nodes, refs, deferred, queue_size, np.zeros(count, np.int64), empty,
+                           False, sub_stats, sub_rows)
+    first_rows = top_rows + np.concatenate([[0], np.cumsum(sub_rows)[:-1]]).astype(np.int64)
+    wide = _new_rows(top_rows + int(sub_rows.sum()))
+    _collapse(nodes, refs, 0, 0, binary.top_count, none, first_rows, queue, wide, True, True,
+              np.zeros(4))
+    with parallel_chunksize(1):
+        _collapse_subtrees(nodes, refs, deferred, queue_size, first_rows, wide, True, sub_stats,
+                           sub_rows)
+    for part in sub_stats:
+        stats += part
+    return wide, stats
 
 
 @njit(cache=True)
-def _tree_stats(nodes, refs, traversal_cost, intersection_cost):
-    """(sah_cost, node_count, leaf_count) of the binary tree, walked from the root."""
-    stack = np.empty(MAX_DEPTH + 2, np.int64)
-    stack[0] = 0
-    top = 1
-    internal_area = 0.0
-    leaf_area = 0.0
-    node_count = 0
-    leaf_count = 0
-    while top > 0:
-        top -= 1
-        node = stack[top]
-        node_count += 1
-        count = refs[node, BINARY_COUNT]
-        if count > 0:
-            leaf_count += 1
-            leaf_area += _half_area(nodes, node) * count
-        else:
-            internal_area += _half_area(nodes, node)
-            stack[top] = refs[node, BINARY_REF]
-            stack[top + 1] = refs[node, BINARY_REF] + 1
-            top += 2
-    root_area = _half_area(nodes, 0)
-    if not root_area > 0:
-        root_area = 1.0
-    sah = (traversal_cost * internal_area + intersection_cost * leaf_area) / root_area
-    return sah, node_count, leaf_count
+def _new_rows(rows):
+    return np.empty((rows, NODE_WIDTH), np.float32)
 
 
 def build_bvh_from_records(prims, lo, hi, params=None):
@@ -220,24 +284,25 @@ def build_bvh_from_records(prims, lo, hi, params=None):
     params = params or BuildParams()
     if len(prims) == 0:
         raise ValueError("cannot build a BVH over zero primitives")
-    binary, depth = build_binary_bvh(
+    binary = build_binary_bvh(
         prims, int(params.bins), int(params.max_leaf_size), float(params.traversal_cost),
         float(params.intersection_cost))
-    binary_refs = binary.view(np.int32)
-    sah_cost, node_count, leaf_count = _tree_stats(
-        binary, binary_refs, float(params.traversal_cost), float(params.intersection_cost))
-    children, child_row, rows = _collapse(binary, binary_refs, len(prims))
-    nodes = _wide_nodes(binary, binary_refs, children, child_row, rows)
-    del binary, binary_refs, children, child_row
+    nodes, stats = _wide_layout(binary, len(prims))
+    root_area = float(_half_area(binary.nodes, 0))
+    binary_depth = binary.depth
+    del binary  # its nodes are the build's largest temporary after the records
+    sah_cost = (params.traversal_cost * stats[INTERNAL_AREA]
+                + params.intersection_cost * stats[LEAF_AREA]) / (root_area if root_area > 0
+                                                                  else 1.0)
     return BVH(
         nodes=nodes,
         refs=nodes.view(np.int32),
         order=prims.view(np.int32)[:, PRIM_INDEX].astype(np.int64),
         lo=np.asarray(lo, np.float64).copy(),
         hi=np.asarray(hi, np.float64).copy(),
-        depth=int(depth),
-        node_count=int(node_count),
-        leaf_count=int(leaf_count),
+        depth=int(binary_depth),
+        node_count=int(stats[NODE_COUNT]),
+        leaf_count=int(stats[LEAF_COUNT]),
         sah_cost=float(sah_cost),
     )
 

@@ -11,6 +11,7 @@ from raycore.bvh.build import (
     BINARY_REF,
     MAX_DEPTH,
     MIN_TASK,
+    PRIM_INDEX,
     BuildParams,
     build_binary_bvh,
     records_from_bounds,
@@ -126,8 +127,9 @@ def test_boxes_beyond_float32_are_bounded_by_infinity():
     assert leaf_of[3][1][0] == np.inf and leaf_of[4][0][0] == -np.inf
 
 
-def test_reported_quality_matches_the_tree():
-    lo, hi = random_boxes(5000, seed=3)
+@pytest.mark.parametrize("count", [3000, 10 * MIN_TASK])
+def test_reported_quality_matches_the_tree(count):
+    lo, hi = random_boxes(count, seed=3)
     params = BuildParams(traversal_cost=1.5, intersection_cost=1.0)
     bvh = build_bvh(lo, hi, params)
     leaves = list(walk(bvh))
@@ -136,9 +138,10 @@ def test_reported_quality_matches_the_tree():
 
     # MacDonald–Booth cost of the binary tree the wide one was collapsed from, recomputed
     prims = records_from_bounds(lo, hi)
-    nodes, depth = build_binary_bvh(prims, params.bins, params.max_leaf_size,
-                                    params.traversal_cost, params.intersection_cost)
-    assert np.array_equal(prims.view(np.int32)[:, 6], bvh.order)
+    binary = build_binary_bvh(prims, params.bins, params.max_leaf_size, params.traversal_cost,
+                              params.intersection_cost)
+    assert np.array_equal(prims.view(np.int32)[:, PRIM_INDEX], bvh.order)
+    nodes, depth = binary.nodes, binary.depth
     rows, depths = binary_nodes(nodes)
     box = nodes[rows, 0:6].astype(np.float64)
     extent = box[:, 3:6] - box[:, 0:3]
@@ -151,7 +154,7 @@ def test_reported_quality_matches_the_tree():
     assert bvh.node_count == len(rows) == 2 * bvh.leaf_count - 1
     assert bvh.depth == depth == depths.max()
     # collapsing keeps the binary tree's leaves, and fills a wide node unless only leaves are
-    # left to open
+    # left to open (the larger tree is collapsed in parts, its top, then the rest in parallel)
     first = nodes.view(np.int32)[rows, BINARY_REF]
     assert sorted((int(f), int(c)) for *_, f, c in leaves) == sorted(
         zip(first[leaf].tolist(), count[leaf].tolist(), strict=True))
