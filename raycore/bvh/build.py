@@ -353,6 +353,66 @@ def _partition(prims, start, end, axis, bucket, cmin, scale, last, sides):
     return j
 
 
+@njit(cache=True, parallel=True)
+def _partition_parallel(prims, start, end, axis, bucket, cmin, scale, last, sides):
+    """:func:`_partition` on all cores: each chunk of PARALLEL_BINNING records is partitioned
+    on its own, then the right records left of the boundary trade places with the left records
+    right of it, in pieces on all cores.  The chunks do not depend on the number of threads, so
+    neither does the order the records end in."""
+    n = end - start
+    chunks = (n + PARALLEL_BINNING - 1) // PARALLEL_BINNING
+    lefts = np.empty(chunks, np.int64)
+    chunk_sides = np.empty((chunks, 2, SIDE_WIDTH), np.float32)
+    for c in prange(chunks):
+        first = start + c * PARALLEL_BINNING
+        own = np.empty((2, SIDE_WIDTH), np.float32)  # see _bin_parallel
+        lefts[c] = _partition(prims, first, min(end, first + PARALLEL_BINNING), axis, bucket,
+                              cmin, scale, last, own) - first
+        chunk_sides[c] = own
+    for side in range(2):
+        _store(sides, side, _nothing())
+        for c in range(chunks):
+            for k in (0, 1, 2, CENTROIDS, CENTROIDS + 1, CENTROIDS + 2):
+                sides[side, k] = min(sides[side, k], chunk_sides[c, side, k])
+                sides[side, 3 + k] = max(sides[side, 3 + k], chunk_sides[c, side, 3 + k])
+    mid = start + lefts.sum()
+    # runs of misplaced records, in order: right records before mid, left records from mid on
+    wrong_right = np.empty((chunks, 2), np.int64)  # (first record, count)
+    wrong_left = np.empty((chunks, 2), np.int64)
+    for c in range(chunks):
+        first = start + c * PARALLEL_BINNING
+        split = first + lefts[c]
+        stop = min(end, first + PARALLEL_BINNING)
+        wrong_right[c, 0] = split
+        wrong_right[c, 1] = max(0, min(stop, mid) - split)
+        wrong_left[c, 0] = max(first, mid)
+        wrong_left[c, 1] = max(0, split - max(first, mid))
+    right_before = np.cumsum(wrong_right[:, 1]) - wrong_right[:, 1]
+    left_before = np.cumsum(wrong_left[:, 1]) - wrong_left[:, 1]
+    moves = wrong_right[:, 1].sum()
+    pieces = (moves + PARALLEL_BINNING - 1) // PARALLEL_BINNING
+    for piece in prange(pieces):
+        k = piece * PARALLEL_BINNING
+        stop = min(moves, k + PARALLEL_BINNING)
+        a = np.searchsorted(right_before, k, side="right") - 1
+        b = np.searchsorted(left_before, k, side="right") - 1
+        i = wrong_right[a, 0] + k - right_before[a]
+        j = wrong_left[b, 0] + k - left_before[b]
+        while k < stop:
+            while i >= wrong_right[a, 0] + wrong_right[a, 1]:
+                a += 1
+                i = wrong_right[a, 0]
+            while j >= wrong_left[b, 0] + wrong_left[b, 1]:
+                b += 1
+                j = wrong_left[b, 0]
+            for f in range(PRIM_WIDTH):
+                prims[i, f], prims[j, f] = prims[j, f], prims[i, f]
+            i += 1
+            j += 1
+            k += 1
+    return mid
+
+
 @njit(cache=True)
 def _bound_range(prims, start, end, sides, side):
     """Box and centroid box of primitives ``start:end`` into ``sides[side]``."""
@@ -385,15 +445,12 @@ def _bound_all(prims):
 
 
 @njit(cache=True)
-def _split_node(prims, nodes, refs, node, start, end, costs, bins, best, sides, cbox, scale):
-    """Make ``node`` (primitives ``start:end``) a leaf, or partition its primitives at the
-    cheapest split ``best`` (axis, bucket, cost) found with centroid box ``cbox`` and ``scale``,
-    and return the boundary between its children, whose boxes and centroid boxes are left in
-    ``sides`` (2, SIDE_WIDTH).  ``costs`` is (max_leaf_size, traversal_cost, intersection_cost).
-    Returns -1 for a leaf.
-    """
+def _made_leaf(nodes, refs, node, start, end, costs, best):
+    """Make ``node`` (primitives ``start:end``) a leaf and return True when that costs no more
+    than its cheapest split ``best`` (axis, bucket, cost), or when it cannot be split and fits;
+    ``costs`` is (max_leaf_size, traversal_cost, intersection_cost)."""
     size = end - start
-    best_axis, best_bucket, best_cost = best
+    best_axis, _, best_cost = best
     area = _half_area(nodes[node, 0], nodes[node, 1], nodes[node, 2], nodes[node, 3],
                       nodes[node, 4], nodes[node, 5])
     leaf_cost = costs[2] * size
@@ -402,7 +459,16 @@ def _split_node(prims, nodes, refs, node, start, end, costs, bins, best, sides, 
     if make_leaf or (best_axis < 0 and size <= costs[0]):
         refs[node, BINARY_REF] = start
         refs[node, BINARY_COUNT] = size
-        return -1
+        return True
+    return False
+
+
+@njit(cache=True)
+def _divide(prims, start, end, bins, best, sides, cbox, scale):
+    """Partition primitives ``start:end`` at split ``best`` found with centroid box ``cbox``
+    and ``scale``, or halve them when no split separates anything; returns the boundary, and
+    leaves the children's boxes and centroid boxes in ``sides`` (2, SIDE_WIDTH)."""
+    best_axis, best_bucket, _ = best
     if best_axis >= 0:
         last = np.float32(bins - 1)
         return _partition(prims, start, end, best_axis, best_bucket, cbox[best_axis],
@@ -465,10 +531,9 @@ def _build_subtree(prims, nodes, refs, root, start, end, root_cbox, depth, first
             _clear_bins(counts, boxes, used)
             _bin_range(prims, lo, hi, cbox, scale, used, counts, boxes)
             best = _best_split(counts, boxes, scale, used, suffix)
-        mid = _split_node(prims, nodes, refs, node, lo, hi, costs, used, best, sides, cbox,
-                          scale)
-        if mid < 0:
+        if _made_leaf(nodes, refs, node, lo, hi, costs, best):
             continue
+        mid = _divide(prims, lo, hi, used, best, sides, cbox, scale)
         if level + 1 >= MAX_DEPTH:
             return -1
         _add_children(nodes, refs, node, free, sides)
@@ -535,10 +600,13 @@ def _split_top(prims, nodes, refs, bins, costs, task_size):
             _clear_bins(counts, boxes, bins)
             _bin_range(prims, start, end, cbox, scale, bins, counts, boxes)
         best = _best_split(counts, boxes, scale, bins, suffix)
-        mid = _split_node(prims, nodes, refs, node, start, end, costs, bins, best, sides, cbox,
-                          scale)
-        if mid < 0:
+        if _made_leaf(nodes, refs, node, start, end, costs, best):
             continue
+        if best[0] >= 0 and end - start > PARALLEL_BINNING:
+            mid = _partition_parallel(prims, start, end, best[0], best[1], cbox[best[0]],
+                                      scale[best[0]], np.float32(bins - 1), sides)
+        else:
+            mid = _divide(prims, start, end, bins, best, sides, cbox, scale)
         if level + 1 >= MAX_DEPTH:
             made = -1
             break

@@ -11,6 +11,7 @@ from raycore.bvh.build import (
     BINARY_REF,
     MAX_DEPTH,
     MIN_TASK,
+    PARALLEL_BINNING,
     PRIM_INDEX,
     BuildParams,
     build_binary_bvh,
@@ -56,17 +57,21 @@ def check_leaves(bvh, lo, hi, max_leaf_size):
     (float64, compared exactly with the float32 boxes); returns the leaf sizes."""
     count = len(lo)
     assert np.array_equal(np.sort(bvh.order), np.arange(count))
-    seen = np.zeros(count, int)
-    sizes = []
-    for box_lo, box_hi, first, size in walk(bvh):
-        prims = bvh.order[first:first + size]
-        seen[prims] += 1
-        sizes.append(size)
-        assert size <= max_leaf_size
-        assert np.all(box_lo <= lo[prims]) and np.all(box_hi >= hi[prims])
-    assert np.all(seen == 1)
+    leaves = list(walk(bvh))
+    box_lo = np.array([leaf[0] for leaf in leaves])
+    box_hi = np.array([leaf[1] for leaf in leaves])
+    first = np.array([leaf[2] for leaf in leaves])
+    sizes = np.array([leaf[3] for leaf in leaves])
+    assert sizes.max() <= max_leaf_size
+    # leaf of each position in leaf order, and the primitive at that position
+    leaf_of = np.repeat(np.arange(len(leaves)), sizes)
+    position = np.repeat(first, sizes) + np.arange(sizes.sum()) - np.repeat(
+        np.cumsum(sizes) - sizes, sizes)
+    prims = bvh.order[position]
+    assert np.array_equal(np.sort(prims), np.arange(count)), "a primitive in no or two leaves"
+    assert np.all(box_lo[leaf_of] <= lo[prims]) and np.all(box_hi[leaf_of] >= hi[prims])
     assert 0 <= bvh.depth <= MAX_DEPTH
-    return sizes
+    return sizes.tolist()
 
 
 def binary_nodes(nodes):
@@ -85,10 +90,11 @@ def binary_nodes(nodes):
     return np.array(rows), np.array(depths)
 
 
-@pytest.mark.parametrize("count", [1, 2, 7, 1000, 3 * MIN_TASK])
+@pytest.mark.parametrize("count", [1, 2, 7, 1000, 3 * MIN_TASK, 3 * PARALLEL_BINNING])
 def test_every_primitive_lands_in_exactly_one_leaf_that_contains_it(count):
     # float64 bounds rounded outwards to float32 boxes must still contain them exactly; the
-    # largest count goes through the top phase and the subtrees built in parallel
+    # two largest counts go through the top phase and the subtrees built in parallel, the
+    # largest also through binning and partitioning on all cores
     lo, hi = random_boxes(count)
     bvh = build_bvh(lo, hi)
     check_leaves(bvh, lo, hi, BuildParams().max_leaf_size)
