@@ -5,10 +5,59 @@ import time
 from dataclasses import replace
 
 import numpy as np
+from numba import njit, prange
 
-from raycore.bvh.layout import build_bvh
+from raycore.bvh.build import PRIM_INDEX, PRIM_WIDTH, round_down32, round_up32
+from raycore.bvh.layout import build_bvh_from_records
 from raycore.bvh.leaves import pack_leaves
 from raycore.rays import as_float_array
+
+#: Faces per parallel work item of the passes over faces below.
+FACE_CHUNK = 65536
+
+
+@njit(cache=True, parallel=True)
+def referenced_bounds(vertices, faces):
+    """(lo, hi): (3,) float64 bounds of the vertices that ``faces`` (F, 3) reference in
+    ``vertices`` (V, 3), without gathering the (F, 3, 3) corners."""
+    n = faces.shape[0]
+    chunks = (n + FACE_CHUNK - 1) // FACE_CHUNK
+    parts = np.empty((chunks, 6))
+    for c in prange(chunks):
+        parts[c, 0:3] = np.inf
+        parts[c, 3:6] = -np.inf
+        for f in range(c * FACE_CHUNK, min(n, (c + 1) * FACE_CHUNK)):
+            for k in range(3):
+                for a in range(3):
+                    x = vertices[faces[f, k], a]
+                    parts[c, a] = min(parts[c, a], x)
+                    parts[c, 3 + a] = max(parts[c, 3 + a], x)
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for a in range(3):
+        lo[a] = parts[:, a].min()
+        hi[a] = parts[:, 3 + a].max()
+    return lo, hi
+
+
+@njit(cache=True, parallel=True)
+def triangle_records(vertices, faces):
+    """BVH primitive records of triangles: their boxes rounded outwards to float32 and their
+    indices, (F, PRIM_WIDTH) float32 (see :mod:`raycore.bvh.build`), straight from ``vertices``
+    (V, 3) in the scene's dtype and ``faces`` (F, 3)."""
+    n = faces.shape[0]
+    prims = np.empty((n, PRIM_WIDTH), np.float32)
+    index = prims.view(np.int32)
+    for f in prange(n):
+        for a in range(3):
+            x0 = vertices[faces[f, 0], a]
+            x1 = vertices[faces[f, 1], a]
+            x2 = vertices[faces[f, 2], a]
+            prims[f, a] = round_down32(min(x0, x1, x2))
+            prims[f, 3 + a] = round_up32(max(x0, x1, x2))
+        index[f, PRIM_INDEX] = f
+        index[f, PRIM_INDEX + 1] = 0
+    return prims
 
 
 class Mesh:
@@ -42,6 +91,7 @@ class Mesh:
                 f"faces must index vertices in [0, {len(self.vertices)}), "
                 f"got indices in [{faces.min()}, {faces.max()}]")
         self.faces = np.ascontiguousarray(faces, dtype=np.int64)
+        self._bounds = None
         self.bvh = None  # its leaves reference leaf_blocks once built
         self.leaf_blocks = None
         self.slot_face = None
@@ -51,8 +101,10 @@ class Mesh:
     @property
     def bounds(self):
         """(lo, hi): (3,) float64 bounds of the referenced vertices."""
-        used = self.vertices[self.faces.ravel()]
-        return used.min(axis=0), used.max(axis=0)
+        if self._bounds is None:
+            self._bounds = referenced_bounds(self.vertices, self.faces)
+        lo, hi = self._bounds
+        return lo.copy(), hi.copy()
 
     def transformed_bounds(self, matrix):
         """World bounds of the mesh under a 4x4 affine ``matrix`` (its box's 8 corners)."""
@@ -68,11 +120,13 @@ class Mesh:
             return
         start = time.perf_counter()
         # bound the triangles as the kernels will see them, after rounding to dtype
-        corners = self.vertices.astype(dtype)[self.faces]  # (F, 3 vertices, 3)
-        bounded = corners.astype(np.float64)
-        bvh = build_bvh(bounded.min(axis=1), bounded.max(axis=1), params)
-        self.leaf_blocks, self.slot_face = pack_leaves(bvh.nodes, bvh.refs, bvh.order,
-                                                       self.vertices, self.faces, dtype)
+        vertices = self.vertices.astype(dtype, copy=False)
+        lo, hi = referenced_bounds(vertices, self.faces)
+        # let a rebuild's old tree go before the new one takes memory
+        self.bvh = self.leaf_blocks = self.slot_face = self._built_for = None
+        bvh = build_bvh_from_records(triangle_records(vertices, self.faces), lo, hi, params)
+        self.leaf_blocks, self.slot_face = pack_leaves(bvh.nodes, bvh.refs, bvh.order, vertices,
+                                                       self.faces, dtype)
         # slot_face replaces the leaf order, and the leaves now point at blocks
         self.bvh = replace(bvh, order=None)
         self.build_seconds = time.perf_counter() - start

@@ -17,9 +17,17 @@ scene keeps conservative boxes at half the memory.
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from numba import njit, parallel_chunksize, prange
 
-from raycore.bvh.build import BuildParams, build_binary_bvh
+from raycore.bvh.build import (
+    BINARY_COUNT,
+    BINARY_REF,
+    FLOAT32_MAX,
+    PRIM_INDEX,
+    BuildParams,
+    build_binary_bvh,
+    records_from_bounds,
+)
 
 WIDTH = 8
 NODE_WIDTH = 8 * WIDTH
@@ -63,114 +71,249 @@ class BVH:
         return self.nodes.nbytes + (0 if self.order is None else self.order.nbytes)
 
 
-def round_outwards(lo, hi):
-    """Round float64 bounds to float32 so that the float32 box contains the float64 one."""
-    lo32 = lo.astype(np.float32)
-    hi32 = hi.astype(np.float32)
-    lo32 = np.where(lo32 > lo, np.nextafter(lo32, np.float32(-np.inf)), lo32)
-    hi32 = np.where(hi32 < hi, np.nextafter(hi32, np.float32(np.inf)), hi32)
-    return lo32, hi32
+@njit(cache=True, inline="always")
+def _half_area(nodes, node):
+    box = nodes[node]
+    dx = np.float64(box[3]) - np.float64(box[0])
+    dy = np.float64(box[4]) - np.float64(box[1])
+    dz = np.float64(box[5]) - np.float64(box[2])
+    return dx * dy + dy * dz + dz * dx
 
 
-def _half_areas(lo, hi):
-    extent = np.maximum(hi - lo, 0.0)
-    return extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] + extent[:, 2] * extent[:, 0]
+#: Fields of a collapse's tree statistics (float64): summed half-areas of internal nodes and of
+#: leaves times their sizes, node count, leaf count.
+INTERNAL_AREA, LEAF_AREA, NODE_COUNT, LEAF_COUNT = range(4)
+
+
+@njit(cache=True, inline="always")
+def _count_node(refs, nodes, node, stats):
+    count = refs[node, BINARY_COUNT]
+    area = _half_area(nodes, node)
+    stats[NODE_COUNT] += 1
+    if count > 0:
+        stats[LEAF_AREA] += area * count
+        stats[LEAF_COUNT] += 1
+    else:
+        stats[INTERNAL_AREA] += area
 
 
 @njit(cache=True)
-def _collapse(left, right, areas):
-    """Group binary nodes into wide nodes of up to WIDTH children.
+def _collapse(nodes, refs, root, first_row, top_count, deferred, deferred_rows, queue, wide,
+              write, count_root, stats):
+    """Group the binary nodes below ``root`` into wide nodes of up to WIDTH children, breadth
+    first, as rows ``first_row, first_row + 1, ...`` of ``wide``.
 
     From each wide node's binary node, the child of largest surface area that is an internal
-    node is replaced by its two children until there are WIDTH of them (or only leaves).
+    node is replaced by its two children until there are WIDTH of them (or only leaves).  A
+    row depends only on its binary node, so the top of the tree (``top_count`` > 0) can leave
+    the rows of binary nodes past the top records (``>= top_count``) to collapses of their own,
+    run beside each other: such a node is listed in ``deferred``, and its row taken from
+    ``deferred_rows`` in the same order.
+
+    Parameters
+    ----------
+    nodes, refs : ndarray, shape (M, BINARY_WIDTH)
+        Binary node records (float32 and their int32 view).
+    queue : ndarray of int64
+        Scratch, at least as long as the rows made.
+    wide : ndarray of float32, shape (K, NODE_WIDTH)
+        Written only when ``write``: a first call counts rows, a second fills them.
+    count_root : bool
+        Whether ``root`` itself adds to ``stats`` (the tree statistics, see INTERNAL_AREA), to
+        which every node placed in a slot adds.
 
     Returns
     -------
-    children : ndarray of int64, shape (K, WIDTH)
-        Binary node of each child slot, -1 where unused; row 0 is the root.
-    child_row : ndarray of int64, shape (K, WIDTH)
-        Wide row of each internal child (0 elsewhere).
+    rows, deferred_count : int
     """
-    n = len(left)
-    children = np.full((max(n, 1), WIDTH), -1, np.int64)
-    child_row = np.zeros((max(n, 1), WIDTH), np.int64)
-    source = np.empty(max(n, 1), np.int64)  # binary node of each wide row
-    source[0] = 0
+    wide_refs = wide.view(np.int32)
+    slots = np.empty(WIDTH, np.int64)
+    slot_row = np.empty(WIDTH, np.int64)
+    if count_root:
+        _count_node(refs, nodes, root, stats)
+    queue[0] = root
     rows = 1
     row = 0
+    deferred_count = 0
     while row < rows:
-        node = source[row]
-        if left[node] < 0:
-            # a root leaf: a wide node with one child
-            children[row, 0] = node
-            row += 1
-            continue
-        children[row, 0] = left[node]
-        children[row, 1] = right[node]
-        size = 2
+        node = queue[row]
+        size = 1
+        slots[0] = node  # a root leaf: a wide node with one child
+        if refs[node, BINARY_COUNT] == 0:
+            slots[0] = refs[node, BINARY_REF]
+            slots[1] = refs[node, BINARY_REF] + 1
+            _count_node(refs, nodes, slots[0], stats)
+            _count_node(refs, nodes, slots[1], stats)
+            size = 2
         while size < WIDTH:
             widest = -1
+            widest_area = 0.0
             for slot in range(size):
-                child = children[row, slot]
-                if left[child] >= 0 and (widest < 0 or areas[child] > areas[children[row, widest]]):
-                    widest = slot
+                child = slots[slot]
+                if refs[child, BINARY_COUNT] == 0:
+                    area = _half_area(nodes, child)
+                    if widest < 0 or area > widest_area:
+                        widest = slot
+                        widest_area = area
             if widest < 0:
                 break
-            child = children[row, widest]
-            children[row, widest] = left[child]
-            children[row, size] = right[child]
+            child = slots[widest]
+            slots[widest] = refs[child, BINARY_REF]
+            slots[size] = refs[child, BINARY_REF] + 1
+            _count_node(refs, nodes, slots[widest], stats)
+            _count_node(refs, nodes, slots[size], stats)
             size += 1
         for slot in range(size):
-            child = children[row, slot]
-            if left[child] >= 0:
-                source[rows] = child
-                child_row[row, slot] = rows
+            child = slots[slot]
+            if refs[child, BINARY_COUNT] > 0 or node == child:
+                continue
+            if top_count > 0 and child >= top_count:
+                if write:
+                    slot_row[slot] = deferred_rows[deferred_count]
+                else:
+                    deferred[deferred_count] = child
+                deferred_count += 1
+            else:
+                queue[rows] = child
+                slot_row[slot] = first_row + rows
                 rows += 1
+        if write:
+            _write_row(nodes, refs, wide, wide_refs, first_row + row, slots, slot_row, size)
         row += 1
-    return children[:rows].copy(), child_row[:rows].copy()
+    return rows, deferred_count
+
+
+@njit(cache=True, inline="always")
+def _write_row(nodes, refs, wide, wide_refs, row, slots, slot_row, size):
+    """Wide row ``row`` from binary nodes ``slots[:size]``.  A box that reaches the clamp of the
+    primitive records (+-FLOAT32_MAX) is widened to infinity, so that it still contains a
+    primitive beyond float32's range."""
+    for slot in range(WIDTH):
+        if slot >= size:
+            for axis in range(3):
+                wide[row, axis * WIDTH + slot] = np.inf
+                wide[row, (axis + 3) * WIDTH + slot] = -np.inf
+            wide_refs[row, REFS + slot] = 0
+            wide_refs[row, COUNTS + slot] = 0
+            continue
+        child = slots[slot]
+        for axis in range(3):
+            lo = nodes[child, axis]
+            hi = nodes[child, 3 + axis]
+            wide[row, axis * WIDTH + slot] = -np.inf if lo == -FLOAT32_MAX else lo
+            wide[row, (axis + 3) * WIDTH + slot] = np.inf if hi == FLOAT32_MAX else hi
+        count = refs[child, BINARY_COUNT]
+        wide_refs[row, REFS + slot] = refs[child, BINARY_REF] if count > 0 else slot_row[slot]
+        wide_refs[row, COUNTS + slot] = count
+
+
+@njit(cache=True, parallel=True)
+def _collapse_subtrees(nodes, refs, roots, queue_size, first_rows, wide, write, stats, rows):
+    """:func:`_collapse` below each of ``roots`` on all cores; ``stats`` (T, 4) and ``rows``
+    (T,) receive each one's figures.  ``queue_size`` bounds any one's rows."""
+    none = np.empty(0, np.int64)
+    for t in prange(len(roots)):
+        queue = np.empty(queue_size, np.int64)
+        own = np.zeros(4)  # not a row of stats, which neighbouring subtrees' threads share
+        rows[t], _ = _collapse(nodes, refs, roots[t], first_rows[t], 0, none, none, queue, wide,
+                               write, False, own)
+        stats[t] = own
+
+
+def _wide_layout(binary, prim_count):
+    """Collapse a :class:`~raycore.bvh.build.BinaryBVH` into wide rows: (nodes, stats), with
+    stats the tree statistics (see INTERNAL_AREA), summed in an order that does not depend on
+    the number of threads.
+
+    The top of the tree is collapsed first; the rows below it, inside the subtrees that were
+    built in parallel, are then collapsed in parallel too, each group after the rows before it.
+    Every collapse runs twice, counting rows and then filling them, so that the rows need no
+    room beyond their own.
+    """
+    nodes = binary.nodes
+    refs = nodes.view(np.int32)
+    empty = np.empty((0, NODE_WIDTH), np.float32)
+    none = np.empty(0, np.int64)
+    stats = np.zeros(4)
+    if binary.top_count == 1:
+        # one subtree, the whole tree
+        queue = np.empty(max(prim_count, 1), np.int64)
+        rows, _ = _collapse(nodes, refs, 0, 0, 0, none, none, queue, empty, False, True, stats)
+        wide = _new_rows(rows)
+        _collapse(nodes, refs, 0, 0, 0, none, none, queue, wide, True, True, np.zeros(4))
+        return wide, stats
+    queue = np.empty(binary.top_count, np.int64)
+    deferred = np.empty(WIDTH * binary.top_count, np.int64)
+    top_rows, count = _collapse(nodes, refs, 0, 0, binary.top_count, deferred, none, queue,
+                                empty, False, True, stats)
+    deferred = deferred[:count]
+    # a subtree over m primitives has at most m - 1 internal nodes, one per wide row
+    queue_size = binary.largest_subtree
+    sub_stats = np.empty((count, 4))
+    sub_rows = np.empty(count, np.int64)
+    with parallel_chunksize(1):
+        _collapse_subtrees(nodes, refs, deferred, queue_size, np.zeros(count, np.int64), empty,
+                           False, sub_stats, sub_rows)
+    first_rows = top_rows + np.concatenate([[0], np.cumsum(sub_rows)[:-1]]).astype(np.int64)
+    wide = _new_rows(top_rows + int(sub_rows.sum()))
+    _collapse(nodes, refs, 0, 0, binary.top_count, none, first_rows, queue, wide, True, True,
+              np.zeros(4))
+    with parallel_chunksize(1):
+        _collapse_subtrees(nodes, refs, deferred, queue_size, first_rows, wide, True, sub_stats,
+                           sub_rows)
+    for part in sub_stats:
+        stats += part
+    return wide, stats
+
+
+@njit(cache=True)
+def _new_rows(rows):
+    return np.empty((rows, NODE_WIDTH), np.float32)
+
+
+def build_bvh_from_records(prims, lo, hi, params=None):
+    """Build a flat BVH over primitive records (see :func:`raycore.bvh.build.records_from_bounds`),
+    which are left in leaf order.
+
+    Parameters
+    ----------
+    prims : ndarray of float32, shape (F, PRIM_WIDTH)
+    lo, hi : ndarray of float64, shape (3,)
+        Bounds of everything, reported as the BVH's.
+    params : BuildParams, optional
+    """
+    params = params or BuildParams()
+    if len(prims) == 0:
+        raise ValueError("cannot build a BVH over zero primitives")
+    binary = build_binary_bvh(
+        prims, int(params.bins), int(params.max_leaf_size), float(params.traversal_cost),
+        float(params.intersection_cost))
+    nodes, stats = _wide_layout(binary, len(prims))
+    root_area = float(_half_area(binary.nodes, 0))
+    binary_depth = binary.depth
+    del binary  # its nodes are the build's largest temporary after the records
+    sah_cost = (params.traversal_cost * stats[INTERNAL_AREA]
+                + params.intersection_cost * stats[LEAF_AREA]) / (root_area if root_area > 0
+                                                                  else 1.0)
+    return BVH(
+        nodes=nodes,
+        refs=nodes.view(np.int32),
+        order=prims.view(np.int32)[:, PRIM_INDEX].astype(np.int64),
+        lo=np.asarray(lo, np.float64).copy(),
+        hi=np.asarray(hi, np.float64).copy(),
+        depth=int(binary_depth),
+        node_count=int(stats[NODE_COUNT]),
+        leaf_count=int(stats[LEAF_COUNT]),
+        sah_cost=float(sah_cost),
+    )
 
 
 def build_bvh(lo, hi, params=None):
-    """Build a flat BVH over primitives with bounds ``lo``, ``hi`` (float64, shape (F, 3)),
+    """Build a flat BVH over primitives with bounds ``lo``, ``hi`` (float, shape (F, 3)),
     with :class:`BuildParams` (defaults when None)."""
-    params = params or BuildParams()
     lo = np.ascontiguousarray(lo, dtype=np.float64)
     hi = np.ascontiguousarray(hi, dtype=np.float64)
     if len(lo) == 0:
         raise ValueError("cannot build a BVH over zero primitives")
-    order, node_lo, node_hi, left, right, first, count, depth = build_binary_bvh(
-        lo, hi, int(params.bins), int(params.max_leaf_size),
-        float(params.traversal_cost), float(params.intersection_cost),
-    )
-    is_leaf = count > 0
-    areas = _half_areas(node_lo, node_hi)
-    root_area = areas[0] if areas[0] > 0 else 1.0
-    sah_cost = float(
-        (params.traversal_cost * areas[~is_leaf].sum()
-         + params.intersection_cost * (areas[is_leaf] * count[is_leaf]).sum()) / root_area
-    )
-
-    box_lo, box_hi = round_outwards(node_lo, node_hi)
-    children, child_row = _collapse(left, right, areas)
-    rows = len(children)
-    nodes = np.zeros((rows, NODE_WIDTH), np.float32)
-    refs = nodes.view(np.int32)
-    real = children >= 0
-    c = np.where(real, children, 0)
-    for axis in range(3):
-        nodes[:, axis * WIDTH:(axis + 1) * WIDTH] = np.where(real, box_lo[c, axis], np.inf)
-        nodes[:, (axis + 3) * WIDTH:(axis + 4) * WIDTH] = np.where(real, box_hi[c, axis], -np.inf)
-    leaf = real & is_leaf[c]
-    refs[:, REFS:REFS + WIDTH] = np.where(leaf, first[c], np.where(real, child_row, 0))
-    refs[:, COUNTS:COUNTS + WIDTH] = np.where(leaf, count[c], 0)
-    return BVH(
-        nodes=nodes,
-        refs=refs,
-        order=order,
-        lo=node_lo[0].copy(),
-        hi=node_hi[0].copy(),
-        depth=int(depth),
-        node_count=int(len(node_lo)),
-        leaf_count=int(is_leaf.sum()),
-        sah_cost=sah_cost,
-    )
+    return build_bvh_from_records(records_from_bounds(lo, hi), lo.min(axis=0), hi.max(axis=0),
+                                  params)

@@ -1,10 +1,24 @@
-"""The binned SAH build: structure, containment, parameters and reported quality."""
+"""The binned SAH build: structure, containment, parameters, reported quality, threads and
+degenerate input."""
 
+import numba
 import numpy as np
 import pytest
 
-from raycore.bvh.build import MAX_DEPTH, BuildParams, build_binary_bvh
+from raycore import Scene
+from raycore.bvh.build import (
+    BINARY_COUNT,
+    BINARY_REF,
+    MAX_DEPTH,
+    MIN_TASK,
+    PARALLEL_BINNING,
+    PRIM_INDEX,
+    BuildParams,
+    build_binary_bvh,
+    records_from_bounds,
+)
 from raycore.bvh.layout import COUNTS, REFS, WIDTH, build_bvh
+from raycore.mesh import Mesh
 
 
 def random_boxes(count, seed=0):
@@ -38,19 +52,53 @@ def walk(bvh, internal=None):
                 stack.append((ref, lo, hi))
 
 
-@pytest.mark.parametrize("count", [1, 2, 7, 1000])
+def check_leaves(bvh, lo, hi, max_leaf_size):
+    """Every primitive lies in exactly one leaf, whose box contains its bounds ``lo``, ``hi``
+    (float64, compared exactly with the float32 boxes); returns the leaf sizes."""
+    count = len(lo)
+    assert np.array_equal(np.sort(bvh.order), np.arange(count))
+    leaves = list(walk(bvh))
+    box_lo = np.array([leaf[0] for leaf in leaves])
+    box_hi = np.array([leaf[1] for leaf in leaves])
+    first = np.array([leaf[2] for leaf in leaves])
+    sizes = np.array([leaf[3] for leaf in leaves])
+    assert sizes.max() <= max_leaf_size
+    # leaf of each position in leaf order, and the primitive at that position
+    leaf_of = np.repeat(np.arange(len(leaves)), sizes)
+    position = np.repeat(first, sizes) + np.arange(sizes.sum()) - np.repeat(
+        np.cumsum(sizes) - sizes, sizes)
+    prims = bvh.order[position]
+    assert np.array_equal(np.sort(prims), np.arange(count)), "a primitive in no or two leaves"
+    assert np.all(box_lo[leaf_of] <= lo[prims]) and np.all(box_hi[leaf_of] >= hi[prims])
+    assert 0 <= bvh.depth <= MAX_DEPTH
+    return sizes.tolist()
+
+
+def binary_nodes(nodes):
+    """Rows of the binary tree reachable from its root (records no node reaches are skipped),
+    with the depth of each: (rows, depths)."""
+    refs = nodes.view(np.int32)
+    rows, depths = [], []
+    stack = [(0, 0)]
+    while stack:
+        row, depth = stack.pop()
+        rows.append(row)
+        depths.append(depth)
+        if refs[row, BINARY_COUNT] == 0:
+            child = refs[row, BINARY_REF]
+            stack += [(child, depth + 1), (child + 1, depth + 1)]
+    return np.array(rows), np.array(depths)
+
+
+@pytest.mark.parametrize("count", [1, 2, 7, 1000, 3 * MIN_TASK, 3 * PARALLEL_BINNING])
 def test_every_primitive_lands_in_exactly_one_leaf_that_contains_it(count):
+    # float64 bounds rounded outwards to float32 boxes must still contain them exactly; the
+    # two largest counts go through the top phase and the subtrees built in parallel, the
+    # largest also through binning and partitioning on all cores
     lo, hi = random_boxes(count)
     bvh = build_bvh(lo, hi)
-    assert np.array_equal(np.sort(bvh.order), np.arange(count))
-    seen = np.zeros(count, int)
-    for box_lo, box_hi, first, size in walk(bvh):
-        prims = bvh.order[first:first + size]
-        seen[prims] += 1
-        assert size <= BuildParams().max_leaf_size
-        # float32 boxes are rounded outwards, so they contain the float64 bounds exactly
-        assert np.all(box_lo <= lo[prims]) and np.all(box_hi >= hi[prims])
-    assert np.all(seen == 1)
+    check_leaves(bvh, lo, hi, BuildParams().max_leaf_size)
+    assert np.array_equal(bvh.lo, lo.min(axis=0)) and np.array_equal(bvh.hi, hi.max(axis=0))
 
 
 def test_identical_primitives_still_respect_the_leaf_size():
@@ -61,8 +109,33 @@ def test_identical_primitives_still_respect_the_leaf_size():
     assert sum(sizes) == 50 and max(sizes) <= 3
 
 
-def test_reported_quality_matches_the_tree():
-    lo, hi = random_boxes(5000, seed=3)
+def test_many_identical_primitives_split_by_count_in_a_shallow_tree():
+    # every centroid coincides, so no bucket separates anything: halving by count keeps the
+    # depth at log2 of the leaf count, and the top phase must do the same
+    count = 5 * MIN_TASK
+    lo = np.full((count, 3), -1.0)
+    hi = np.full((count, 3), 2.0)
+    bvh = build_bvh(lo, hi)
+    sizes = check_leaves(bvh, lo, hi, BuildParams().max_leaf_size)
+    assert sum(sizes) == count
+    assert bvh.depth <= np.ceil(np.log2(count))
+
+
+def test_boxes_beyond_float32_are_bounded_by_infinity():
+    # float64 objects past float32's range: the float32 boxes must still contain them
+    lo, hi = random_boxes(20, seed=7)
+    lo[3], hi[3] = [1e39, 0, 0], [2e39, 1, 1]
+    lo[4], hi[4] = [-3e300, -1, -1], [-1e300, 1, 1]
+    bvh = build_bvh(lo, hi)
+    check_leaves(bvh, lo, hi, BuildParams().max_leaf_size)
+    leaf_of = {int(p): (box_lo, box_hi) for box_lo, box_hi, first, size in walk(bvh)
+               for p in bvh.order[first:first + size]}
+    assert leaf_of[3][1][0] == np.inf and leaf_of[4][0][0] == -np.inf
+
+
+@pytest.mark.parametrize("count", [3000, 10 * MIN_TASK])
+def test_reported_quality_matches_the_tree(count):
+    lo, hi = random_boxes(count, seed=3)
     params = BuildParams(traversal_cost=1.5, intersection_cost=1.0)
     bvh = build_bvh(lo, hi, params)
     leaves = list(walk(bvh))
@@ -70,18 +143,25 @@ def test_reported_quality_matches_the_tree():
     assert 0 < bvh.depth <= MAX_DEPTH
 
     # MacDonald–Booth cost of the binary tree the wide one was collapsed from, recomputed
-    order, node_lo, node_hi, left, _, first, count, depth = build_binary_bvh(
-        lo, hi, params.bins, params.max_leaf_size, params.traversal_cost,
-        params.intersection_cost)
-    extent = node_hi - node_lo
+    prims = records_from_bounds(lo, hi)
+    binary = build_binary_bvh(prims, params.bins, params.max_leaf_size, params.traversal_cost,
+                              params.intersection_cost)
+    assert np.array_equal(prims.view(np.int32)[:, PRIM_INDEX], bvh.order)
+    nodes, depth = binary.nodes, binary.depth
+    rows, depths = binary_nodes(nodes)
+    box = nodes[rows, 0:6].astype(np.float64)
+    extent = box[:, 3:6] - box[:, 0:3]
     area = extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] + extent[:, 2] * extent[:, 0]
+    count = nodes.view(np.int32)[rows, BINARY_COUNT]
     leaf = count > 0
     expected = (params.traversal_cost * area[~leaf].sum()
                 + params.intersection_cost * (area[leaf] * count[leaf]).sum()) / area[0]
     assert bvh.sah_cost == pytest.approx(expected, rel=1e-12)
-    assert bvh.node_count == len(node_lo) == 2 * bvh.leaf_count - 1 and bvh.depth == depth
+    assert bvh.node_count == len(rows) == 2 * bvh.leaf_count - 1
+    assert bvh.depth == depth == depths.max()
     # collapsing keeps the binary tree's leaves, and fills a wide node unless only leaves are
-    # left to open
+    # left to open (the larger tree is collapsed in parts, its top, then the rest in parallel)
+    first = nodes.view(np.int32)[rows, BINARY_REF]
     assert sorted((int(f), int(c)) for *_, f, c in leaves) == sorted(
         zip(first[leaf].tolist(), count[leaf].tolist(), strict=True))
     used = np.isfinite(bvh.nodes[:, 0:WIDTH])
@@ -95,6 +175,85 @@ def test_sah_prefers_fewer_tests_when_intersections_are_expensive():
     cheap = build_bvh(lo, hi, BuildParams(max_leaf_size=16, intersection_cost=0.1))
     dear = build_bvh(lo, hi, BuildParams(max_leaf_size=16, intersection_cost=10.0))
     assert cheap.leaf_count < dear.leaf_count
+
+
+def test_the_tree_does_not_depend_on_the_number_of_threads():
+    # enough primitives for the top phase to bin on all cores and leave many subtrees
+    lo, hi = random_boxes(40 * MIN_TASK, seed=11)
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = build_bvh(lo, hi)
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        every = build_bvh(lo, hi)
+    finally:
+        numba.set_num_threads(threads)
+    assert np.array_equal(one.nodes.view(np.int32), every.nodes.view(np.int32))
+    assert np.array_equal(one.order, every.order)
+    assert (one.sah_cost, one.depth, one.node_count) == (every.sah_cost, every.depth,
+                                                         every.node_count)
+
+
+def grid_mesh(cells):
+    """A flat square of 2 * cells**2 triangles in the plane z = 0."""
+    u = np.linspace(0.0, 1.0, cells + 1)
+    x, y = np.meshgrid(u, u, indexing="ij")
+    vertices = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], axis=1)
+    corner = (np.arange(cells)[:, None] * (cells + 1) + np.arange(cells)[None, :]).ravel()
+    faces = np.concatenate([
+        np.stack([corner, corner + cells + 1, corner + 1], axis=1),
+        np.stack([corner + 1, corner + cells + 1, corner + cells + 2], axis=1)])
+    return vertices, faces
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_mesh_leaves_hold_each_triangle_as_the_scene_stores_it(dtype):
+    vertices, faces = grid_mesh(60)
+    vertices = vertices * 3.1 + 0.1  # coordinates that float32 cannot hold exactly
+    mesh = Mesh(vertices, faces)
+    params = BuildParams()
+    mesh.build(np.dtype(dtype), params)
+    stored = vertices.astype(dtype)
+    corners = stored[faces]  # (F, 3, 3), a reference built without the compiled passes
+    check_leaves(mesh.bvh, corners.min(axis=1), corners.max(axis=1), params.max_leaf_size)
+    assert mesh.leaf_vertices.dtype == np.dtype(dtype)
+    assert np.array_equal(mesh.leaf_vertices, corners[mesh.bvh.order].reshape(-1, 9))
+    assert np.array_equal(mesh.bvh.lo, stored.min(axis=0))
+    lo, hi = mesh.bounds
+    assert np.array_equal(lo, vertices.min(axis=0)) and np.array_equal(hi, vertices.max(axis=0))
+
+
+def test_mesh_bounds_ignore_vertices_no_face_uses():
+    vertices = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [50, 50, 50], [-9, -9, -9]])
+    lo, hi = Mesh(vertices, [[0, 1, 2]]).bounds
+    assert lo.tolist() == [0, 0, 0] and hi.tolist() == [1, 1, 0]
+
+
+def test_one_triangle_makes_a_tree_of_one_leaf():
+    scene = Scene()
+    scene.add_mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    hits = scene.intersect([[0.25, 0.25, 1.0]], [[0, 0, -1.0]])
+    assert hits.prim_id.tolist() == [0] and hits.t.tolist() == [1.0]
+    stats = scene.stats()["meshes"][0]
+    assert (stats["nodes"], stats["leaves"], stats["depth"]) == (1, 1, 0)
+
+
+def test_a_mesh_of_identical_triangles_builds_and_answers():
+    # 4 * MIN_TASK copies of one triangle: every centroid coincides, through both phases
+    count = 4 * MIN_TASK
+    vertices = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    faces = np.tile([0, 1, 2], (count, 1))
+    mesh = Mesh(vertices, faces)
+    params = BuildParams()
+    mesh.build(np.dtype("float32"), params)
+    lo = np.zeros((count, 3))
+    hi = np.tile([1.0, 1, 0], (count, 1))
+    check_leaves(mesh.bvh, lo, hi, params.max_leaf_size)
+    assert mesh.bvh.depth <= np.ceil(np.log2(count))
+    scene = Scene()
+    scene.add_mesh(vertices, faces)
+    hits = scene.intersect([[0.25, 0.25, 1.0]], [[0, 0, -1.0]])
+    assert hits.t.tolist() == [1.0] and 0 <= hits.prim_id[0] < count
 
 
 @pytest.mark.parametrize("field, value", [("bins", 1), ("max_leaf_size", 0),
