@@ -104,18 +104,34 @@ def random_rays(lo, hi, count, seed=0):
     return origins, directions
 
 
-#: Direction from the box's centre to the light: a key light, 45 degrees from the cameras' view
-#: (halfway between :data:`EYE_DIRECTION` and a direction square to it), so that the shadow rays
-#: mix rays that are blocked and rays that reach the light.
-LIGHT_DIRECTION = EYE_DIRECTION + np.array([1.0, 0.5, -0.5]) / np.linalg.norm([1.0, 0.5, -0.5])
-LIGHT_DIRECTION /= np.linalg.norm(LIGHT_DIRECTION)
+#: A direction square to :data:`EYE_DIRECTION`: the candidate lights turn towards it.
+SIDE_DIRECTION = np.array([1.0, 0.5, -0.5]) / np.linalg.norm([1.0, 0.5, -0.5])
 
 
-def light_position(lo, hi):
-    """A point light beside the box [lo, hi], one box diagonal from its centre."""
+def light_positions(lo, hi, count=13):
+    """Candidate point lights one box diagonal from the centre of [lo, hi], turning in equal
+    steps from the cameras' eye (0 degrees) past the side (90) to behind the box (180).
+
+    Returns
+    -------
+    ndarray of float64, shape (count, 3)
+    """
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-    direction = LIGHT_DIRECTION
-    return (lo + hi) / 2 + np.linalg.norm(hi - lo) * direction
+    angles = np.linspace(0.0, np.pi, count)[:, None]
+    directions = np.cos(angles) * EYE_DIRECTION + np.sin(angles) * SIDE_DIRECTION
+    return (lo + hi) / 2 + np.linalg.norm(hi - lo) * directions
+
+
+def half_shadow_light(lo, hi, blocked_fraction):
+    """The candidate light (:func:`light_positions`) whose shadow rays come closest to half
+    blocked, so that the any-hit set mixes rays that stop at a first hit with rays that cross
+    the whole tree to the light, whatever the mesh's shape.
+
+    ``blocked_fraction(light)`` gives the fraction of the shadow rays towards ``light`` that are
+    blocked (on a sample of them).
+    """
+    lights = light_positions(lo, hi)
+    return lights[np.argmin([abs(blocked_fraction(light) - 0.5) for light in lights])]
 
 
 def shadow_rays(origins, directions, t, normals, light):

@@ -17,9 +17,10 @@ meshes, where one call still takes 50 ms or more):
     ``framed`` (the same eye, its view narrowed until >= 90 % of the rays hit), ``random``
     (from uniform points inside the bounds, uniform directions); raycore float32 and float64
     against Open3D's float32 ``cast_rays`` and serial embreex (``run(output=1)``);
-  - any hit: ``shadow`` rays from the framed camera's hits towards a point light, raycore
-    ``occluded`` against Open3D's ``test_occlusions`` (origins offset off the surface once, the
-    same rays for both, tmin = 0, tmax = 1 at the light);
+  - any hit: ``shadow`` rays from the framed camera's hits towards a point light placed where
+    about half of them are blocked, raycore ``occluded`` against Open3D's ``test_occlusions``
+    (origins offset off the surface once, the same rays for both, tmin = 0, tmax = 1 at the
+    light);
   - ``count`` and ``intersect_all`` on the random rays against Open3D's ``count_intersections``
     and ``list_intersections``;
   - the gain from one thread to two: raycore float32 with ``numba.set_num_threads(1)`` and Open3D
@@ -52,7 +53,7 @@ from benchmarks.anchors import open3d_closest
 from benchmarks.rays import (
     camera_rays,
     framed_camera_rays,
-    light_position,
+    half_shadow_light,
     random_rays,
     shadow_rays,
 )
@@ -72,6 +73,8 @@ BUILD_ROUNDS = {"small": 3, "large": 2, "quick": 3}
 CLOSEST_SETS = ("camera", "framed", "random")
 #: The sets on which the former method's ratio is shown
 FORMER_SETS = ("camera", "random")
+#: Shadow rays on which each candidate light is tried (``benchmarks.rays.half_shadow_light``)
+SHADOW_SAMPLE = 4096
 
 
 def with_threads(count, function):
@@ -162,9 +165,16 @@ def ray_sets(vertices, faces, open3d_scene, sizes):
     out = open3d_scene.cast_rays(contenders.open3d_rays(*sets["framed"]))
     t = out["t_hit"].numpy()
     hit = np.isfinite(t)
-    light = light_position(lo, hi)
-    sets["shadow"] = shadow_rays(sets["framed"][0][hit], sets["framed"][1][hit], t[hit],
-                                 out["primitive_normals"].numpy()[hit], light)
+    hits = (sets["framed"][0][hit], sets["framed"][1][hit], t[hit],
+            out["primitive_normals"].numpy()[hit])
+    sample = tuple(a[::max(1, len(a) // SHADOW_SAMPLE)] for a in hits)
+
+    def blocked_fraction(light):
+        rays = contenders.open3d_rays(*shadow_rays(*sample, light))
+        return float(np.mean(open3d_scene.test_occlusions(rays, 0.0, 1.0).numpy()))
+
+    light = half_shadow_light(lo, hi, blocked_fraction)
+    sets["shadow"] = shadow_rays(*hits, light)
     notes = {"camera": f"{camera_size}x{camera_size}, field of view 40 degrees",
              "framed": f"{camera_size}x{camera_size}, field of view {fov:.1f} degrees",
              "random": f"{random_count} rays from inside the bounds",
