@@ -5,7 +5,7 @@ beforehand in its native form (``benchmarks.contenders``) and its outputs are ta
 them.  Contenders are timed in interleaved rounds (A, B, C, A, B, C, ...), best of ``--rounds``.
 
 For every mesh (``benchmarks.meshes``: each shared mesh, and nefertiti subdivided to 1.6M and
-6.4M triangles; 1024x1024 camera rays and 1M random rays, 512x512 and 250k on the subdivided
+6.4M triangles; 1024x1024 camera rays and 500k random rays, 512x512 and 250k on the subdivided
 meshes, where one call still takes 50 ms or more):
 
 * build: raycore (add_mesh, build, one ray), Open3D (add_triangles, one ray: Embree builds
@@ -67,7 +67,7 @@ DTYPES = (np.float32, np.float64)
 #: full run fits in about 15 minutes on 2 cores (a large mesh's call still takes >= 50 ms)
 LARGE = 1_000_000
 #: Rays per set: (camera width = height, random rays)
-RAY_COUNTS = {"small": (1024, 1_000_000), "large": (512, 250_000), "quick": (256, 65_536)}
+RAY_COUNTS = {"small": (1024, 500_000), "large": (512, 250_000), "quick": (256, 65_536)}
 #: Interleaved build rounds
 BUILD_ROUNDS = {"small": 3, "large": 2, "quick": 3}
 CLOSEST_SETS = ("camera", "framed", "random")
