@@ -106,11 +106,15 @@ def random_rays(lo, hi, count, seed=0):
 
 #: A direction square to :data:`EYE_DIRECTION`: the candidate lights turn towards it.
 SIDE_DIRECTION = np.array([1.0, 0.5, -0.5]) / np.linalg.norm([1.0, 0.5, -0.5])
+#: Radius of the spherical area light, in box diagonals: a point then sees part of the light,
+#: and how much of its shadow rays are blocked changes smoothly with the light's place.
+LIGHT_RADIUS = 0.5
 
 
-def light_positions(lo, hi, count=13):
-    """Candidate point lights one box diagonal from the centre of [lo, hi], turning in equal
-    steps from the cameras' eye (0 degrees) past the side (90) to behind the box (180).
+def light_centres(lo, hi, count=13):
+    """Candidate centres of the area light, one box diagonal from the centre of [lo, hi],
+    turning in equal steps from the cameras' eye (0 degrees) past the side (90) to behind the
+    box (180).
 
     Returns
     -------
@@ -122,20 +126,34 @@ def light_positions(lo, hi, count=13):
     return (lo + hi) / 2 + np.linalg.norm(hi - lo) * directions
 
 
-def half_shadow_light(lo, hi, blocked_fraction):
-    """The candidate light (:func:`light_positions`) whose shadow rays come closest to half
-    blocked, so that the any-hit set mixes rays that stop at a first hit with rays that cross
-    the whole tree to the light, whatever the mesh's shape.
+def light_points(centre, lo, hi, count, seed=0):
+    """``count`` points on the spherical area light around ``centre`` (radius
+    :data:`LIGHT_RADIUS` box diagonals), uniform over its surface: one per shadow ray.
 
-    ``blocked_fraction(light)`` gives the fraction of the shadow rays towards ``light`` that are
-    blocked (on a sample of them).
+    Returns
+    -------
+    ndarray of float64, shape (count, 3)
     """
-    lights = light_positions(lo, hi)
-    return lights[np.argmin([abs(blocked_fraction(light) - 0.5) for light in lights])]
+    directions = np.random.default_rng(seed).normal(size=(count, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    radius = LIGHT_RADIUS * np.linalg.norm(np.asarray(hi, np.float64) - lo)
+    return np.asarray(centre, np.float64) + radius * directions
 
 
-def shadow_rays(origins, directions, t, normals, light):
-    """Shadow rays from the hit points of float32 rays towards a point light.
+def half_shadow_light(lo, hi, blocked_fraction):
+    """The candidate light centre (:func:`light_centres`) whose shadow rays come closest to
+    half blocked, so that the any-hit set mixes rays that stop at a first hit with rays that
+    cross the tree to the light, whatever the mesh's shape.
+
+    ``blocked_fraction(centre)`` gives the fraction of the shadow rays towards the light around
+    ``centre`` that are blocked (on a sample of them).
+    """
+    centres = light_centres(lo, hi)
+    return centres[np.argmin([abs(blocked_fraction(centre) - 0.5) for centre in centres])]
+
+
+def shadow_rays(origins, directions, t, normals, lights):
+    """Shadow rays from the hit points of float32 rays towards points on a light.
 
     Parameters
     ----------
@@ -145,19 +163,21 @@ def shadow_rays(origins, directions, t, normals, light):
         Their hit distances.
     normals : ndarray of float32, shape (N, 3)
         Geometric normals at the hits (any orientation, any length > 0).
-    light : array_like, shape (3,)
+    lights : array_like, shape (N, 3)
+        The point each shadow ray goes to.
 
     Returns
     -------
     origins, directions : ndarray of float32, shape (N, 3)
-        Origins moved off the surface towards the light (``raycore.offset_ray_origin``), so that
-        every library traces them from tmin = 0; each direction reaches the light at t = 1.
+        Origins moved off the surface towards their light point (``raycore.offset_ray_origin``),
+        so that every library traces them from tmin = 0; each direction reaches its light point
+        at t = 1.
     """
     points = origins + t[:, None] * directions
     # The point carries the rounding of t (a few ulps of |t d|) and of the product and sum:
     # 8 eps of |o| + |t d| per coordinate covers them, and keeps self-hits out of the set.
     error = 8 * np.finfo(np.float32).eps * (np.abs(origins) + np.abs(t[:, None] * directions))
     normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
-    light = np.asarray(light, np.float32)
-    shadow_origins = offset_ray_origin(points, normals, light - points, error=error)
-    return shadow_origins, np.ascontiguousarray(light - shadow_origins)
+    lights = np.asarray(lights, np.float32)
+    shadow_origins = offset_ray_origin(points, normals, lights - points, error=error)
+    return shadow_origins, np.ascontiguousarray(lights - shadow_origins)

@@ -74,6 +74,16 @@ def thread_table(document):
     return lines
 
 
+def _load_warning(document):
+    """A paragraph when other work kept every core busy during the run."""
+    load = document["load_average"]
+    if min(load["start"], load["end"]) < document["machine"]["cpu_count"]:
+        return []
+    return ["", "**The load average exceeded the number of cores during this run**: a second "
+            "thread often found no free core, so the two-thread figures, their ratios to serial "
+            "embreex and the gains from a second thread are disturbed more than the rest."]
+
+
 def _per_triangle(count, triangles):
     return f"{count / triangles:.0f}"
 
@@ -87,20 +97,22 @@ def build_table(document):
         "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for mesh in document["meshes"]:
-        seconds, memory, n = mesh["build_seconds"], mesh["build_memory"], mesh["triangles"]
-        ours = memory["raycore"]
+        seconds, n = mesh["build_seconds"], mesh["triangles"]
+        memory = ["", "", "", "", ""]  # not measured on small meshes
+        if "build_memory" in mesh:
+            ours = mesh["build_memory"]["raycore"]
+            memory = [_per_triangle(ours["peak_extra_bytes"], n),
+                      _per_triangle(ours["temporaries_bytes"], n),
+                      f"**{ours['temporaries_bytes'] / ours['tree_bytes']:.1f}**",
+                      *(_per_triangle(mesh["build_memory"][name]["peak_extra_bytes"], n)
+                        for name in ("open3d", "embreex"))]
         lines.append(
             f"| {mesh['mesh']} | {n:,} | {seconds['raycore-float32']:.3f} "
             f"| {seconds['raycore-float64']:.3f} | {seconds['open3d']:.3f} "
             f"| {seconds['embreex']:.3f} "
             f"| **{seconds['raycore-float32'] / seconds['open3d']:.2f}** "
             f"| {_per_triangle(mesh['tree_bytes']['float32'], n)} "
-            f"({_per_triangle(mesh['tree_bytes']['float64'], n)}) "
-            f"| {_per_triangle(ours['peak_extra_bytes'], n)} "
-            f"| {_per_triangle(ours['temporaries_bytes'], n)} "
-            f"| **{ours['temporaries_bytes'] / ours['tree_bytes']:.1f}** "
-            f"| {_per_triangle(memory['open3d']['peak_extra_bytes'], n)} "
-            f"| {_per_triangle(memory['embreex']['peak_extra_bytes'], n)} |")
+            f"({_per_triangle(mesh['tree_bytes']['float64'], n)}) | " + " | ".join(memory) + " |")
     return lines
 
 
@@ -125,6 +137,17 @@ def markdown(document):
         f"{document['rounds']}. Speed ratios: raycore's throughput over the other's (> 1: "
         "raycore is faster). raycore float64 is compared with Open3D's float32. embreex is "
         "serial (one ray per call into Embree); Open3D and raycore use both cores.",
+        *_load_warning(document),
+        "",
+        "Meshes: the shared meshes, and nefertiti subdivided twice (1.6M triangles) and three "
+        "times (6.4M) with trimesh's `subdivide` (`benchmarks/meshes.py`). Ray sets: `camera` "
+        "sees the whole mesh (many rays miss); `framed` has the same eye and a view narrowed "
+        "until at least 90 % of a probe's rays hit; `random` starts inside the bounds in "
+        "uniform directions; `shadow` goes from the framed camera's hits (origins offset off "
+        "the surface, tmin = 0) to random points on a spherical area light placed where about "
+        "half of them are blocked; "
+        "`count` and `intersect_all` use the random rays. 1024x1024 camera rays and 500k "
+        "random rays on the shared meshes, 512x512 and 250k on the subdivided ones.",
         "",
         "## Queries",
         "",
@@ -153,8 +176,9 @@ def markdown(document):
         "loads its cache then; the warm-up queries are not included). Memory: each build in a "
         "fresh process after a small warm-up build, peak resident memory during the build minus "
         "the resident memory before it; raycore's temporaries are that minus the finished tree "
-        "(`Scene.stats()['bytes']`), the scene's own copy of the input included. Small meshes' "
-        "memory figures are dominated by allocator granularity.",
+        "(`Scene.stats()['bytes']`), the scene's own copy of the input included. Measured on "
+        "the meshes of 1M triangles or more: below, allocator pools and granularity are as "
+        "large as the build (Embree reuses the warm-up build's blocks).",
         "",
         *build_table(document),
         "",

@@ -11,16 +11,16 @@ meshes, where one call still takes 50 ms or more):
 * build: raycore (add_mesh, build, one ray), Open3D (add_triangles, one ray: Embree builds
   then) and embreex (scene, one ray), after warm-up builds in the same process; the first build
   of the process (Numba's cache loading) is reported apart.  Peak memory of each build is
-  measured in a fresh process (``benchmarks.build_memory``).
+  measured in a fresh process (``benchmarks.build_memory``), on meshes of 1M triangles or more.
 * queries, each ray set with the fraction of its rays that hit:
   - closest hit on three ray sets: ``camera`` (the whole mesh in view, so many rays miss),
     ``framed`` (the same eye, its view narrowed until >= 90 % of the rays hit), ``random``
     (from uniform points inside the bounds, uniform directions); raycore float32 and float64
     against Open3D's float32 ``cast_rays`` and serial embreex (``run(output=1)``);
-  - any hit: ``shadow`` rays from the framed camera's hits towards a point light placed where
-    about half of them are blocked, raycore ``occluded`` against Open3D's ``test_occlusions``
-    (origins offset off the surface once, the same rays for both, tmin = 0, tmax = 1 at the
-    light);
+  - any hit: ``shadow`` rays from the framed camera's hits to random points on a spherical
+    area light placed where about half of them are blocked (``benchmarks.rays``), raycore
+    ``occluded`` against Open3D's ``test_occlusions`` (origins offset off the surface once, the
+    same rays for both, tmin = 0, tmax = 1 at the light);
   - ``count`` and ``intersect_all`` on the random rays against Open3D's ``count_intersections``
     and ``list_intersections``;
   - the gain from one thread to two: raycore float32 with ``numba.set_num_threads(1)`` and Open3D
@@ -54,6 +54,7 @@ from benchmarks.rays import (
     camera_rays,
     framed_camera_rays,
     half_shadow_light,
+    light_points,
     random_rays,
     shadow_rays,
 )
@@ -73,6 +74,10 @@ BUILD_ROUNDS = {"small": 3, "large": 2, "quick": 3}
 CLOSEST_SETS = ("camera", "framed", "random")
 #: The sets on which the former method's ratio is shown
 FORMER_SETS = ("camera", "random")
+#: Build memory is measured from this many triangles.  Below, allocator pools and granularity
+#: are as large as the build: Embree reuses the blocks of the warm-up build, and Open3D's build
+#: of 100k triangles then seems to take 1 byte per triangle.
+MEMORY_MIN_TRIANGLES = 1_000_000
 #: Shadow rays on which each candidate light is tried (``benchmarks.rays.half_shadow_light``)
 SHADOW_SAMPLE = 4096
 
@@ -169,16 +174,18 @@ def ray_sets(vertices, faces, open3d_scene, sizes):
             out["primitive_normals"].numpy()[hit])
     sample = tuple(a[::max(1, len(a) // SHADOW_SAMPLE)] for a in hits)
 
-    def blocked_fraction(light):
-        rays = contenders.open3d_rays(*shadow_rays(*sample, light))
+    def blocked_fraction(centre):
+        lights = light_points(centre, lo, hi, len(sample[0]))
+        rays = contenders.open3d_rays(*shadow_rays(*sample, lights))
         return float(np.mean(open3d_scene.test_occlusions(rays, 0.0, 1.0).numpy()))
 
     light = half_shadow_light(lo, hi, blocked_fraction)
-    sets["shadow"] = shadow_rays(*hits, light)
+    sets["shadow"] = shadow_rays(*hits, light_points(light, lo, hi, len(hits[0])))
     notes = {"camera": f"{camera_size}x{camera_size}, field of view 40 degrees",
              "framed": f"{camera_size}x{camera_size}, field of view {fov:.1f} degrees",
              "random": f"{random_count} rays from inside the bounds",
-             "shadow": f"from the framed camera's hits to a light at {np.round(light, 3).tolist()}"}
+             "shadow": "from the framed camera's hits to a spherical light centred at "
+                       f"{np.round(light, 3).tolist()}"}
     return sets, notes
 
 
@@ -294,7 +301,8 @@ def bench_mesh(name, quick, rounds, one_thread_only=False):
         result["build_seconds"] = build_seconds
         result["tree_bytes"] = {dtype: scenes[f"raycore-{dtype}"].stats()["bytes"]
                                 for dtype in ("float32", "float64")}
-        result["build_memory"] = build_memory(name)
+        if quick or len(faces) >= MEMORY_MIN_TRIANGLES:  # a smoke run tries every step
+            result["build_memory"] = build_memory(name)
     return result
 
 
