@@ -55,8 +55,15 @@ fuzz: $(VENV)/.dev-installed
 load: $(VENV)/.dev-installed
 	$(BIN)/python -m benchmarks.service_load --seconds 60
 
+# raycore against Open3D and embreex, each library's own call timed (benchmarks/run.py: every
+# shared mesh and nefertiti subdivided to 1.6M and 6.4M triangles, build time and memory, one
+# thread against serial Embree); time per call from 1 to 1M rays (benchmarks/latency.py, with
+# docs/latency.png); the HTTP service against in-process calls.  About 15 minutes on 2 cores;
+# BENCH_ARGS=--no-large skips the large meshes, BENCH_ARGS=--quick is a smoke run.
+BENCH_ARGS ?=
 bench: $(VENV)/.bench-installed
-	$(BIN)/python -m benchmarks.run
+	$(BIN)/python -m benchmarks.run $(BENCH_ARGS)
+	$(BIN)/python -m benchmarks.latency $(filter --quick,$(BENCH_ARGS))
 	$(BIN)/python -m benchmarks.service_bench
 
 # docs/speed-vs-accuracy.png and docs/model-what-you-need.png with their Markdown tables

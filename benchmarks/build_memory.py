@@ -1,166 +1,74 @@
-"""BVH build time and build memory: raycore against Open3D (Embree), measured honestly.
+"""Peak memory of one build, measured in a fresh process (Linux: reads /proc/self/status).
 
-Time: in one process, after a warm-up build of a small mesh (Numba's cache loading and Embree's
-first-use costs are paid there), each contender builds the mesh from its native inputs and
-answers one ray, in interleaved rounds, best of ``--rounds``.  raycore: ``Scene.add_mesh`` with
-arrays already in the scene's dtype, then ``intersect``.  Open3D: ``add_triangles`` with
-prebuilt tensors, then ``cast_rays`` (Embree builds on commit, at the first query).
-
-Memory: one fresh process per contender.  It loads the mesh and warms up on a small one, then
-resets the kernel's peak-RSS counter (``/proc/self/clear_refs``, Linux only), builds, and reads
-the peak (``VmHWM``).  The build's temporaries are the peak minus the resident memory before the
-build minus the finished tree (``Scene.stats()["bytes"]``).
-
-Run: ``python -m benchmarks.build_memory MESH [MESH ...] [--dtype float32] [--rounds 3]``, where
-MESH is a mesh file trimesh reads or an ``.npz`` with ``vertices`` and ``faces``.
+``python -m benchmarks.build_memory MESH CONTENDER`` prints one JSON object.  The process
+imports the contender's library, makes one warm-up build of a small mesh (so that loading
+Numba's cache or Embree's thread pool is not counted), converts the mesh to the contender's
+native inputs, and then measures the build (mesh added, tree built, one ray traced, as in
+``benchmarks.contenders``): its peak resident memory above the resident memory before it.  For
+raycore it also gives the finished tree's size (``Scene.stats()["bytes"]``): the peak minus the
+tree is what the build's temporaries took (the scene's own copy of the input included).
 """
 
 import argparse
+import gc
 import json
-import subprocess
-import sys
-import time
 
 import numpy as np
 
-WARMUP_MESH = "/work/shared/meshes/suzanne.obj"
+from benchmarks import contenders, meshes
+
+#: contender -> (native inputs from (vertices, faces), build from those inputs)
+BUILDS = {
+    "raycore": (lambda v, f: contenders.raycore_mesh(v, f, np.float32),
+                lambda mesh: contenders.raycore_build(mesh, np.float32)),
+    "open3d": (contenders.open3d_mesh, contenders.open3d_build),
+    "embreex": (contenders.embreex_mesh, contenders.embreex_build),
+}
 
 
-def load(path):
-    """(vertices float64 (V, 3), faces int64 (F, 3)) of a mesh file or an .npz."""
-    if str(path).endswith(".npz"):
-        data = np.load(path)
-        return np.asarray(data["vertices"], np.float64), np.asarray(data["faces"], np.int64)
-    import trimesh
-
-    mesh = trimesh.load(path, force="mesh", process=False)
-    return np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)
-
-
-def one_ray(vertices):
-    """A ray from outside the mesh's box towards its centre, as float64 (1, 3) arrays."""
-    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    centre = (lo + hi) / 2
-    origin = centre - 2 * (hi - lo) * np.array([1.0, 0.3, 0.2])
-    return origin[None], (centre - origin)[None]
-
-
-def raycore_build(vertices, faces, dtype, origins, directions):
-    """Scene with the mesh built and queried once; returns the scene."""
-    from raycore import Scene
-
-    scene = Scene(dtype=dtype)
-    scene.add_mesh(vertices, faces)
-    scene.intersect(origins, directions)
-    return scene
-
-
-def open3d_inputs(vertices, faces, origins, directions):
-    import open3d as o3d
-
-    return (o3d.core.Tensor(vertices.astype(np.float32)),
-            o3d.core.Tensor(faces.astype(np.uint32)),
-            o3d.core.Tensor(np.hstack([origins, directions]).astype(np.float32)))
-
-
-def open3d_build(vertex_tensor, face_tensor, ray_tensor):
-    import open3d as o3d
-
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(vertex_tensor, face_tensor)
-    scene.cast_rays(ray_tensor)
-    return scene
-
-
-def warm_up(dtype):
-    vertices, faces = load(WARMUP_MESH)
-    origins, directions = one_ray(vertices)
-    raycore_build(vertices.astype(dtype), faces, dtype, origins.astype(dtype),
-                  directions.astype(dtype))
-    open3d_build(*open3d_inputs(vertices, faces, origins, directions))
-
-
-def time_builds(path, dtype, rounds):
-    """Best build-and-first-query seconds of raycore and Open3D, interleaved; raycore's stats."""
-    vertices, faces = load(path)
-    origins, directions = one_ray(vertices)
-    warm_up(dtype)
-    native = (vertices.astype(dtype), faces, dtype, origins.astype(dtype), directions.astype(dtype))
-    tensors = open3d_inputs(vertices, faces, origins, directions)
-    best = {"raycore": np.inf, "open3d": np.inf}
-    for _ in range(rounds):
-        start = time.perf_counter()
-        scene = raycore_build(*native)
-        best["raycore"] = min(best["raycore"], time.perf_counter() - start)
-        stats = scene.stats()
-        del scene
-        start = time.perf_counter()
-        o3d_scene = open3d_build(*tensors)
-        best["open3d"] = min(best["open3d"], time.perf_counter() - start)
-        del o3d_scene
-    mesh = stats["meshes"][0]
-    return {"triangles": len(faces), "raycore_s": best["raycore"], "open3d_s": best["open3d"],
-            "ratio": best["raycore"] / best["open3d"], "sah_cost": mesh["sah_cost"],
-            "tree_bytes_per_triangle": stats["bytes"] / len(faces)}
-
-
-def _rss_kib(field):
+def memory_kib():
+    """(resident, peak resident) memory of this process in KiB."""
+    fields = {}
     with open("/proc/self/status") as status:
         for line in status:
-            if line.startswith(field + ":"):
-                return int(line.split()[1])
-    raise RuntimeError(f"no {field} in /proc/self/status")
+            key, _, value = line.partition(":")
+            if key in ("VmRSS", "VmHWM"):
+                fields[key] = int(value.split()[0])
+    return fields["VmRSS"], fields["VmHWM"]
 
 
-def measure_memory(path, dtype, contender):
-    """Peak-RSS figures of one build in this process (call in a fresh one)."""
-    vertices, faces = load(path)
-    origins, directions = one_ray(vertices)
-    warm_up(dtype)
+def reset_peak():
+    """Start the peak resident memory (VmHWM) afresh from the current resident memory."""
+    with open("/proc/self/clear_refs", "w") as clear_refs:
+        clear_refs.write("5")
+
+
+def measure(mesh_name, contender):
+    """Peak and retained memory of building ``mesh_name`` with ``contender``, in bytes."""
+    native, build = BUILDS[contender]
+    build(native(*meshes.warm_up_mesh()))
+    vertices, faces = meshes.load(mesh_name)
+    inputs = native(vertices, faces)
+    del vertices, faces
+    gc.collect()
+    reset_peak()
+    before, _ = memory_kib()
+    scene = build(inputs)
+    after, peak = memory_kib()
+    report = {"mesh": mesh_name, "contender": contender, "peak_extra_bytes": (peak - before) * 1024,
+              "retained_extra_bytes": (after - before) * 1024}
     if contender == "raycore":
-        inputs = (vertices.astype(dtype), faces, dtype, origins.astype(dtype),
-                  directions.astype(dtype))
-        build = raycore_build
-    else:
-        inputs = open3d_inputs(vertices, faces, origins, directions)
-        build = open3d_build
-    with open("/proc/self/clear_refs", "w") as clear:
-        clear.write("5")  # resets VmHWM to the current resident size
-    before = _rss_kib("VmRSS")
-    scene = build(*inputs)
-    peak = _rss_kib("VmHWM")
-    result = {"triangles": len(faces), "contender": contender,
-              "peak_over_before_MiB": (peak - before) / 1024}
-    if contender == "raycore":
-        tree = scene.stats()["bytes"]
-        temporaries = (peak - before) * 1024 - tree
-        result.update(tree_bytes_per_triangle=tree / len(faces),
-                      temporaries_bytes_per_triangle=temporaries / len(faces),
-                      temporaries_over_tree=temporaries / tree)
-    return result
+        report["tree_bytes"] = scene.stats()["bytes"]
+        report["temporaries_bytes"] = report["peak_extra_bytes"] - report["tree_bytes"]
+    return report
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("meshes", nargs="+")
-    parser.add_argument("--dtype", default="float32", choices=["float32", "float64"])
-    parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--memory-only", action="store_true")
-    parser.add_argument("--measure-memory", choices=["raycore", "open3d"], help=argparse.SUPPRESS)
+    parser.add_argument("mesh", help="a name from benchmarks.meshes")
+    parser.add_argument("contender", choices=sorted(BUILDS))
     args = parser.parse_args(argv)
-    if args.measure_memory:
-        print(json.dumps(measure_memory(args.meshes[0], args.dtype, args.measure_memory)))
-        return
-    for path in args.meshes:
-        row = {"mesh": path, "dtype": args.dtype}
-        if not args.memory_only:
-            row.update(time_builds(path, args.dtype, args.rounds))
-        for contender in ("raycore", "open3d"):
-            out = subprocess.run(
-                [sys.executable, "-m", "benchmarks.build_memory", path, "--dtype", args.dtype,
-                 "--measure-memory", contender], capture_output=True, text=True, check=True)
-            row[f"memory_{contender}"] = json.loads(out.stdout.splitlines()[-1])
-        print(json.dumps(row), flush=True)
+    print(json.dumps(measure(args.mesh, args.contender)))
 
 
 if __name__ == "__main__":

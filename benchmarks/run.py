@@ -1,172 +1,377 @@
-"""Side-by-side ray casting benchmark: raycore against embreex, Open3D and trimesh.
+"""Side-by-side ray casting benchmark: raycore against Open3D and embreex, timed honestly.
 
-Same meshes, same rays, one process.  For every mesh: build times and memory per triangle, then
-closest-hit throughput on 1024x1024 primary camera rays (coherent) and 1M random rays from inside
-the bounds (incoherent), reported in Mrays/s and as ratios to each anchor.  Machines are noisy:
-the ratios are what count, so raycore and Open3D (both multi-threaded) are timed in interleaved
-rounds, best of ``ROUNDS``.  Results go to benchmarks/results/bench.json and bench.md.
+Every contender's timed region holds its own call and nothing else: its inputs are made
+beforehand in its native form (``benchmarks.contenders``) and its outputs are taken as it returns
+them.  Contenders are timed in interleaved rounds (A, B, C, A, B, C, ...), best of ``--rounds``.
 
-Run with ``make bench`` (or ``python -m benchmarks.run [--quick]``).
+For every mesh (``benchmarks.meshes``: each shared mesh, and nefertiti subdivided to 1.6M and
+6.4M triangles; 1024x1024 camera rays and 500k random rays, 512x512 and 250k on the subdivided
+meshes, where one call still takes 50 ms or more):
+
+* build: raycore (add_mesh, build, one ray), Open3D (add_triangles, one ray: Embree builds
+  then) and embreex (scene, one ray), after warm-up builds in the same process; the first build
+  of the process (Numba's cache loading) is reported apart.  Peak memory of each build is
+  measured in a fresh process (``benchmarks.build_memory``), on meshes of 1M triangles or more.
+* queries, each ray set with the fraction of its rays that hit:
+  - closest hit on three ray sets: ``camera`` (the whole mesh in view, so many rays miss),
+    ``framed`` (the same eye, its view narrowed until >= 90 % of the rays hit), ``random``
+    (from uniform points inside the bounds, uniform directions); raycore float32 and float64
+    against Open3D's float32 ``cast_rays`` and serial embreex (``run(output=1)``);
+  - any hit: ``shadow`` rays from the framed camera's hits to random points on a spherical
+    area light placed where about half of them are blocked (``benchmarks.rays``), raycore
+    ``occluded`` against Open3D's ``test_occlusions`` (origins offset off the surface once, the
+    same rays for both, tmin = 0, tmax = 1 at the light);
+  - ``count`` and ``intersect_all`` on the random rays against Open3D's ``count_intersections``
+    and ``list_intersections``;
+  - the gain from one thread to two: raycore float32 with ``numba.set_num_threads(1)`` and Open3D
+    with ``nthreads=1``, in the same rounds as their default two-thread calls;
+  - the former method's ratio, once, on the camera and random rays: Open3D timed through the
+    former benchmark's wrapper (``benchmarks.anchors.open3d_closest``).
+* per core: the closest-hit sets again in a subprocess with ``NUMBA_NUM_THREADS=1``, against
+  serial embreex and single-thread Open3D.
+
+Results go to benchmarks/results/bench.json and bench.md (``benchmarks.report``).  Run with
+``make bench`` or ``python -m benchmarks.run [--quick] [--no-large] [--meshes NAME ...]``; the
+full run takes about 15 minutes on 2 cores.
 """
 
 import argparse
 import json
-import platform
+import os
+import subprocess
+import sys
+import tempfile
 import time
 from functools import partial
 from pathlib import Path
 
+import numba
 import numpy as np
-import trimesh
 
-from benchmarks.anchors import ANCHORS
-from benchmarks.rays import camera_rays, random_rays
-from raycore import Scene
+from benchmarks import contenders, meshes, report
+from benchmarks.anchors import open3d_closest
+from benchmarks.rays import (
+    camera_rays,
+    framed_camera_rays,
+    half_shadow_light,
+    light_points,
+    random_rays,
+    shadow_rays,
+)
 
-SHARED_MESHES = Path(__file__).resolve().parents[2] / "shared" / "meshes"
+# best_time is imported from here by benchmarks.speed_accuracy
+from benchmarks.timing import best_time, interleaved_best_times  # noqa: F401
+
 RESULTS = Path(__file__).resolve().parent / "results"
-#: trimesh's NumPy intersector is ~1e4 times slower: it runs on a subsample of this many rays
-TRIMESH_SAMPLE = {"camera": 2000, "random": 300}
+DTYPES = (np.float32, np.float64)
+#: Meshes of at least this many triangles are "large": fewer rays and build rounds, so that a
+#: full run fits in about 15 minutes on 2 cores (a large mesh's call still takes >= 50 ms)
+LARGE = 1_000_000
+#: Rays per set: (camera width = height, random rays)
+RAY_COUNTS = {"small": (1024, 500_000), "large": (512, 250_000), "quick": (256, 65_536)}
+#: Interleaved build rounds
+BUILD_ROUNDS = {"small": 3, "large": 2, "quick": 3}
+CLOSEST_SETS = ("camera", "framed", "random")
+#: The sets on which the former method's ratio is shown
+FORMER_SETS = ("camera", "random")
+#: Build memory is measured from this many triangles.  Below, allocator pools and granularity
+#: are as large as the build: Embree reuses the blocks of the warm-up build, and Open3D's build
+#: of 100k triangles then seems to take 1 byte per triangle.
+MEMORY_MIN_TRIANGLES = 1_000_000
+#: Shadow rays on which each candidate light is tried (``benchmarks.rays.half_shadow_light``)
+SHADOW_SAMPLE = 4096
 
 
-#: Timed calls of each multi-threaded contender (raycore, Open3D) per ray set, interleaved
-ROUNDS = 5
+def with_threads(count, function):
+    """``function`` run with Numba's thread count set to ``count`` (restored afterwards)."""
+    def call():
+        before = numba.get_num_threads()
+        numba.set_num_threads(count)
+        try:
+            return function()
+        finally:
+            numba.set_num_threads(before)
+    return call
 
 
-def best_time(function, *args, repeats=3):
-    """Smallest wall time of ``repeats`` calls of ``function(*args)``, and the last result."""
-    best = np.inf
-    result = None
-    for _ in range(repeats):
+def first_builds():
+    """Seconds of the process's first raycore build of a small mesh in each dtype (Numba loads
+    its cache, or compiles), then warm-up builds and queries of every contender."""
+    vertices, faces = meshes.warm_up_mesh()
+    first = {}
+    for dtype in DTYPES:
         start = time.perf_counter()
-        result = function(*args)
-        best = min(best, time.perf_counter() - start)
-    return best, result
+        contenders.raycore_build(contenders.raycore_mesh(vertices, faces, dtype), dtype)
+        first[np.dtype(dtype).name] = time.perf_counter() - start
+    origins, directions = random_rays(vertices.min(axis=0), vertices.max(axis=0), 1000)
+    for dtype in DTYPES:
+        scene = contenders.raycore_build(contenders.raycore_mesh(vertices, faces, dtype), dtype)
+        o, d = origins.astype(dtype), directions.astype(dtype)
+        for query in (scene.intersect, scene.occluded, scene.count, scene.intersect_all):
+            query(o, d)
+    contenders.open3d_build(contenders.open3d_mesh(vertices, faces))
+    contenders.embreex_build(contenders.embreex_mesh(vertices, faces))
+    return first
 
 
-def interleaved_best_times(calls, rounds=ROUNDS):
-    """Smallest wall time of each of ``calls`` (name -> function of no arguments) over
-    ``rounds`` rounds that call each once in turn, so that the machine's drifts in load reach
-    every contender alike; and each call's last result."""
-    best = dict.fromkeys(calls, np.inf)
-    results = {}
-    for _ in range(rounds):
-        for name, call in calls.items():
-            seconds, results[name] = best_time(call, repeats=1)
-            best[name] = min(best[name], seconds)
-    return best, results
+def build_all(vertices, faces, rounds):
+    """Timed builds of every contender; (seconds, the scenes built last).
 
-
-def meshes(quick):
-    """(name, vertices, faces) of the shared meshes and a synthetic mesh of over 1M triangles."""
-    for path in sorted(SHARED_MESHES.glob("*.obj")):
-        mesh = trimesh.load(path, force="mesh", process=False)
-        yield path.stem, np.asarray(mesh.vertices), np.asarray(mesh.faces)
-        if quick:
-            return
-    sphere = trimesh.creation.icosphere(subdivisions=8)
-    yield "icosphere-1.3M", np.asarray(sphere.vertices), np.asarray(sphere.faces)
-
-
-def bench_mesh(name, vertices, faces, ray_count, camera_size):
-    report = {"mesh": name, "triangles": int(len(faces)), "build_s": {}, "bytes_per_triangle": {},
-              "rays": {}}
-    scenes = {}
-    for dtype in ("float32", "float64"):
-        scene = Scene(dtype=dtype)
-        scene.add_mesh(vertices, faces)
-        seconds, _ = best_time(scene.build, repeats=2)
-        scenes[dtype] = scene
-        report["build_s"][f"raycore-{dtype}"] = seconds
-        report["bytes_per_triangle"][f"raycore-{dtype}"] = scene.stats()["bytes"] / len(faces)
-    report["sah_cost"] = scenes["float32"].stats()["meshes"][0]["sah_cost"]
-    anchors = {}
-    for anchor in ANCHORS:
-        start = time.perf_counter()
-        anchors[anchor.name] = anchor(vertices, faces)
-        report["build_s"][anchor.name] = time.perf_counter() - start
-
-    lo, hi = vertices[faces].reshape(-1, 3).min(0), vertices[faces].reshape(-1, 3).max(0)
-    ray_sets = {
-        "camera": camera_rays(lo, hi, camera_size, camera_size),
-        "random": random_rays(lo, hi, ray_count, seed=1),
+    raycore float32, Open3D and embreex are timed in interleaved rounds; raycore float64, which
+    only serves the float64 queries, is timed once after them.
+    """
+    builds = {
+        "raycore-float32": partial(contenders.raycore_build,
+                                   contenders.raycore_mesh(vertices, faces, np.float32),
+                                   np.float32),
+        "open3d": partial(contenders.open3d_build, contenders.open3d_mesh(vertices, faces)),
+        "embreex": partial(contenders.embreex_build, contenders.embreex_mesh(vertices, faces)),
     }
-    for kind, (origins, directions) in ray_sets.items():
-        origins32 = origins.astype(np.float32)
-        directions32 = directions.astype(np.float32)
-        row = {"mrays_s": {}, "agreement_with_embree": {}}
-        seconds, (t_ref, prim_ref) = best_time(anchors["embreex"].closest, origins32,
-                                               directions32, repeats=1)
-        row["mrays_s"]["embreex"] = len(origins) / seconds / 1e6
-        sample = TRIMESH_SAMPLE[kind]
-        seconds, _ = best_time(anchors["trimesh"].closest, origins[:sample], directions[:sample],
-                               repeats=1)
-        row["mrays_s"]["trimesh"] = sample / seconds / 1e6
-        rays = {"float32": (origins32, directions32), "float64": (origins, directions)}
-        calls = {"open3d": partial(anchors["open3d"].closest, origins32, directions32)}
-        for dtype, scene in scenes.items():
-            o, d = rays[dtype]
-            scene.intersect(o[:1000], d[:1000])  # compile or load the kernels outside the timing
-            calls[f"raycore-{dtype}"] = partial(scene.intersect, o, d)
-        seconds, results = interleaved_best_times(calls)
-        for name, best in seconds.items():
-            row["mrays_s"][name] = len(origins) / best / 1e6
-        for dtype in scenes:
-            hits = results[f"raycore-{dtype}"]
-            both = np.isfinite(hits.t) & np.isfinite(t_ref)
-            row["agreement_with_embree"][dtype] = {
-                "same_prim": float(np.mean(hits.prim_id == prim_ref)),
-                "median_rel_t_error": float(np.median(
-                    np.abs(hits.t[both] - t_ref[both]) / np.abs(t_ref[both]))) if both.any()
-                else 0.0,
-            }
-        for dtype in ("float32", "float64"):
-            ours = row["mrays_s"][f"raycore-{dtype}"]
-            row[f"ratio_{dtype}"] = {a: ours / row["mrays_s"][a] for a in
-                                     ("embreex", "open3d", "trimesh")}
-        report["rays"][kind] = row
-    report["build_ratio_to_embreex"] = report["build_s"]["raycore-float32"] / report["build_s"][
-        "embreex"]
-    return report
+    seconds, scenes = interleaved_best_times(builds, rounds)
+    mesh = contenders.raycore_mesh(vertices, faces, np.float64)
+    seconds["raycore-float64"], scenes["raycore-float64"] = best_time(
+        contenders.raycore_build, mesh, np.float64, repeats=1)
+    return seconds, scenes
 
 
-def markdown(reports):
-    lines = [
-        "| mesh | tris | rays | raycore f32 | raycore f64 | embreex | open3d | trimesh "
-        "| f32/open3d | f64/open3d | f32/embreex | build f32/embreex | B/tri f32 |",
-        "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
-    ]
-    for r in reports:
-        for kind, row in r["rays"].items():
-            m = row["mrays_s"]
-            lines.append(
-                f"| {r['mesh']} | {r['triangles']:,} | {kind} | {m['raycore-float32']:.2f} "
-                f"| {m['raycore-float64']:.2f} | {m['embreex']:.2f} | {m['open3d']:.2f} "
-                f"| {m['trimesh']:.4f} | {row['ratio_float32']['open3d']:.2f} "
-                f"| {row['ratio_float64']['open3d']:.2f} | {row['ratio_float32']['embreex']:.2f} "
-                f"| {r['build_ratio_to_embreex']:.2f} "
-                f"| {r['bytes_per_triangle']['raycore-float32']:.0f} |")
-    return "\n".join(lines)
+def build_memory(mesh_name):
+    """Peak memory of each contender's build of ``mesh_name``, each in a fresh process."""
+    out = {}
+    for contender in ("raycore", "open3d", "embreex"):
+        answer = subprocess.run(
+            [sys.executable, "-m", "benchmarks.build_memory", mesh_name, contender],
+            capture_output=True, text=True, check=True, env=os.environ)
+        out[contender] = json.loads(answer.stdout.splitlines()[-1])
+    return out
+
+
+def ray_sets(vertices, faces, open3d_scene, sizes):
+    """The ray sets of a mesh, float32 (N, 3) C-contiguous arrays, and each one's description.
+
+    Open3D's answers pick the framed camera's view and give the shadow rays' hit points: any
+    library would do, and Open3D's are not the ones under test.
+    """
+    camera_size, random_count = sizes
+    corners = vertices[faces].reshape(-1, 3)
+    lo, hi = corners.min(axis=0), corners.max(axis=0)
+
+    def open3d_hit(origins, directions):
+        out = open3d_scene.cast_rays(contenders.open3d_rays(origins, directions))
+        return np.isfinite(out["t_hit"].numpy())
+
+    framed_origins, framed_directions, fov = framed_camera_rays(lo, hi, camera_size, camera_size,
+                                                               open3d_hit)
+    sets = {
+        "camera": camera_rays(lo, hi, camera_size, camera_size),
+        "framed": (framed_origins, framed_directions),
+        "random": random_rays(lo, hi, random_count, seed=1),
+    }
+    sets = {name: contenders.embreex_arrays(*rays) for name, rays in sets.items()}
+    out = open3d_scene.cast_rays(contenders.open3d_rays(*sets["framed"]))
+    t = out["t_hit"].numpy()
+    hit = np.isfinite(t)
+    hits = (sets["framed"][0][hit], sets["framed"][1][hit], t[hit],
+            out["primitive_normals"].numpy()[hit])
+    sample = tuple(a[::max(1, len(a) // SHADOW_SAMPLE)] for a in hits)
+
+    def blocked_fraction(centre):
+        lights = light_points(centre, lo, hi, len(sample[0]))
+        rays = contenders.open3d_rays(*shadow_rays(*sample, lights))
+        return float(np.mean(open3d_scene.test_occlusions(rays, 0.0, 1.0).numpy()))
+
+    light = half_shadow_light(lo, hi, blocked_fraction)
+    sets["shadow"] = shadow_rays(*hits, light_points(light, lo, hi, len(hits[0])))
+    notes = {"camera": f"{camera_size}x{camera_size}, field of view 40 degrees",
+             "framed": f"{camera_size}x{camera_size}, field of view {fov:.1f} degrees",
+             "random": f"{random_count} rays from inside the bounds",
+             "shadow": "from the framed camera's hits to a spherical light centred at "
+                       f"{np.round(light, 3).tolist()}"}
+    return sets, notes
+
+
+def hit_fraction(name, result):
+    """Fraction of rays that hit, from a contender's answer as it returned it."""
+    if name.startswith("raycore"):
+        return float(np.mean(result.hit if hasattr(result, "hit") else result))
+    if name.startswith("embreex"):
+        return float(np.mean(result["geomID"] >= 0))
+    if isinstance(result, dict):  # Open3D cast_rays
+        return float(np.mean(np.isfinite(result["t_hit"].numpy())))
+    return float(np.mean(result.numpy()))  # Open3D test_occlusions
+
+
+def time_set(calls, rounds, rays):
+    """Best seconds and Mrays/s of each call, and the answers of the last round."""
+    seconds, results = interleaved_best_times(calls, rounds)
+    return {"rays": rays, "seconds": seconds,
+            "mrays_s": {name: rays / s / 1e6 for name, s in seconds.items()}}, results
+
+
+def closest_calls(rays, scenes, tensor, former, one_thread_only=False):
+    """Timed calls of a closest-hit set: name -> function of no arguments.
+
+    ``rays`` are float32 (origins, directions), ``tensor`` the same rays for Open3D."""
+    (o32, d32), (o64, d64) = rays, (rays[0].astype(np.float64), rays[1].astype(np.float64))
+    if one_thread_only:  # the subprocess with NUMBA_NUM_THREADS=1
+        return {"raycore-float32": partial(scenes["raycore-float32"].intersect, o32, d32),
+                "embreex": partial(scenes["embreex"].run, o32, d32, output=1),
+                "open3d-1-thread": partial(scenes["open3d"].cast_rays, tensor, nthreads=1)}
+    calls = {
+        "raycore-float32": partial(scenes["raycore-float32"].intersect, o32, d32),
+        "raycore-float64": partial(scenes["raycore-float64"].intersect, o64, d64),
+        "open3d": partial(scenes["open3d"].cast_rays, tensor),
+        "raycore-float32-1-thread": with_threads(
+            1, partial(scenes["raycore-float32"].intersect, o32, d32)),
+        "open3d-1-thread": partial(scenes["open3d"].cast_rays, tensor, nthreads=1),
+        "embreex": partial(scenes["embreex"].run, o32, d32, output=1),
+    }
+    if former:
+        calls["open3d-former-wrapper"] = partial(open3d_closest, scenes["open3d"], o32, d32)
+    return calls
+
+
+def bench_queries(sets, scenes, rounds, one_thread_only=False):
+    """Timings of every query on every ray set of one mesh."""
+    rows = {}
+    for name in CLOSEST_SETS:
+        tensor = contenders.open3d_rays(*sets[name])
+        calls = closest_calls(sets[name], scenes, tensor, name in FORMER_SETS, one_thread_only)
+        row, results = time_set(calls, rounds, len(sets[name][0]))
+        row["hit_fraction"] = {n: hit_fraction(n, r) for n, r in results.items()
+                               if n != "open3d-former-wrapper"}
+        rows[name] = row
+    if one_thread_only:
+        return rows
+
+    o32, d32 = sets["shadow"]
+    o64, d64 = o32.astype(np.float64), d32.astype(np.float64)
+    tensor = contenders.open3d_rays(o32, d32)
+    calls = {
+        "raycore-float32": partial(scenes["raycore-float32"].occluded, o32, d32, 0.0, 1.0),
+        "raycore-float64": partial(scenes["raycore-float64"].occluded, o64, d64, 0.0, 1.0),
+        "open3d": partial(scenes["open3d"].test_occlusions, tensor, 0.0, 1.0),
+    }
+    row, results = time_set(calls, rounds, len(o32))
+    row["hit_fraction"] = {n: hit_fraction(n, r) for n, r in results.items()}
+    rows["shadow"] = row
+
+    o32, d32 = sets["random"]
+    o64, d64 = o32.astype(np.float64), d32.astype(np.float64)
+    tensor = contenders.open3d_rays(o32, d32)
+    for query, open3d_query in (("count", "count_intersections"),
+                                ("intersect_all", "list_intersections")):
+        calls = {
+            "raycore-float32": partial(getattr(scenes["raycore-float32"], query), o32, d32),
+            "raycore-float64": partial(getattr(scenes["raycore-float64"], query), o64, d64),
+            "open3d": partial(getattr(scenes["open3d"], open3d_query), tensor),
+        }
+        row, results = time_set(calls, rounds, len(o32))
+        if query == "count":
+            ours, theirs = results["raycore-float32"], results["open3d"].numpy()
+        else:
+            ours = results["raycore-float32"].counts
+            theirs = np.diff(results["open3d"]["ray_splits"].numpy())
+        row["mean_crossings"] = {"raycore-float32": float(np.mean(ours)),
+                                 "open3d": float(np.mean(theirs))}
+        row["same_count_fraction"] = float(np.mean(ours == theirs))
+        rows[query] = row
+    return rows
+
+
+def bench_mesh(name, quick, rounds, one_thread_only=False):
+    """Every measurement of one mesh (see the module doc)."""
+    vertices, faces = meshes.load(name)
+    size = "quick" if quick else "large" if len(faces) >= LARGE else "small"
+    load_average = os.getloadavg()[0]
+    if one_thread_only:
+        scenes = {
+            "raycore-float32": contenders.raycore_build(
+                contenders.raycore_mesh(vertices, faces, np.float32), np.float32),
+            "open3d": contenders.open3d_build(contenders.open3d_mesh(vertices, faces)),
+            "embreex": contenders.embreex_build(contenders.embreex_mesh(vertices, faces))}
+    else:
+        build_seconds, scenes = build_all(vertices, faces, BUILD_ROUNDS[size])
+    sets, notes = ray_sets(vertices, faces, scenes["open3d"], RAY_COUNTS[size])
+    rows = bench_queries(sets, scenes, rounds, one_thread_only)
+    for ray_set, row in rows.items():
+        row["ray_set"] = notes["random" if ray_set in ("count", "intersect_all") else ray_set]
+    result = {"mesh": name, "triangles": int(len(faces)), "queries": rows,
+              "load_average_at_start": load_average}
+    if not one_thread_only:
+        result["build_seconds"] = build_seconds
+        result["tree_bytes"] = {dtype: scenes[f"raycore-{dtype}"].stats()["bytes"]
+                                for dtype in ("float32", "float64")}
+        if quick or len(faces) >= MEMORY_MIN_TRIANGLES:  # a smoke run tries every step
+            result["build_memory"] = build_memory(name)
+    return result
+
+
+def one_thread_run(names, quick, rounds):
+    """The per-core measurements, run in a subprocess with ``NUMBA_NUM_THREADS=1``."""
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "one-thread.json"
+        command = [sys.executable, "-m", "benchmarks.run", "--one-thread-output", str(path),
+                   "--rounds", str(rounds), "--meshes", *names] + ["--quick"] * quick
+        subprocess.run(command, check=True, env={**os.environ, "NUMBA_NUM_THREADS": "1"})
+        return json.loads(path.read_text())
+
+
+def machine():
+    """What the figures were measured on."""
+    import embreex
+    import open3d
+
+    with open("/proc/cpuinfo") as cpuinfo:
+        fields = dict(line.split(":", 1) for line in cpuinfo if ":" in line)
+    fields = {key.strip(): value.strip() for key, value in fields.items()}
+    flags = fields.get("flags", "").split()
+    return {"cpu": fields.get("model name", "unknown"), "cpu_count": os.cpu_count(),
+            "simd": [f for f in ("avx2", "avx512f", "fma") if f in flags],
+            "numba": numba.__version__, "numba_threads": numba.config.NUMBA_NUM_THREADS,
+            "threading_layer": numba.threading_layer(), "open3d": open3d.__version__,
+            "embreex": getattr(embreex, "__version__", "unknown")}
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="one mesh, fewer rays")
+    parser.add_argument("--quick", action="store_true",
+                        help=f"one small mesh ({meshes.QUICK_MESH}), few rays: a smoke run")
+    parser.add_argument("--no-large", action="store_true",
+                        help="skip the subdivided meshes of 1.6M and 6.4M triangles")
+    parser.add_argument("--rounds", type=int, default=5, help="interleaved rounds per ray set")
+    parser.add_argument("--meshes", nargs="+", metavar="NAME",
+                        help="measure only these meshes (names from benchmarks.meshes)")
+    parser.add_argument("--out", type=Path, help="folder for bench.json and bench.md (default: "
+                        "benchmarks/results/; with --quick, a temporary folder)")
+    parser.add_argument("--one-thread-output", type=Path, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    ray_count = 100_000 if args.quick else 1_000_000
-    camera_size = 256 if args.quick else 1024
-    reports = []
-    for name, vertices, faces in meshes(args.quick):
-        reports.append(bench_mesh(name, vertices, faces, ray_count, camera_size))
-        print(markdown(reports[-1:]).splitlines()[-1] if reports else "", flush=True)
-        print(markdown(reports[-1:]).splitlines()[-2], flush=True)
-    table = markdown(reports)
-    print(table)
-    RESULTS.mkdir(exist_ok=True)
-    machine = {"cpu_count": __import__("os").cpu_count(), "platform": platform.platform()}
-    (RESULTS / "bench.json").write_text(json.dumps({"machine": machine, "meshes": reports},
-                                                   indent=2))
-    (RESULTS / "bench.md").write_text(table + "\n")
+    start, load_at_start = time.perf_counter(), os.getloadavg()[0]
+    names = args.meshes or meshes.benchmark_meshes(args.quick, large=not args.no_large)
+
+    if args.one_thread_output:
+        first_builds()
+        results = [bench_mesh(name, args.quick, args.rounds, one_thread_only=True)
+                   for name in names]
+        args.one_thread_output.write_text(json.dumps(
+            {"numba_threads": numba.get_num_threads(), "meshes": results}))
+        return
+
+    first = first_builds()
+    results = []
+    for name in names:
+        results.append(bench_mesh(name, args.quick, args.rounds))
+        print(report.mesh_summary(results[-1]), flush=True)
+    one_thread = one_thread_run(names, args.quick, args.rounds)
+    document = {"machine": machine(), "first_build_seconds": first, "rounds": args.rounds,
+                "meshes": results, "one_thread": one_thread,
+                "duration_seconds": time.perf_counter() - start,
+                "load_average": {"start": load_at_start, "end": os.getloadavg()[0]}}
+    out = args.out or (Path(tempfile.mkdtemp(prefix="raycore-bench-")) if args.quick
+                       else RESULTS)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "bench.json").write_text(json.dumps(document, indent=1) + "\n")
+    (out / "bench.md").write_text(report.markdown(document))
+    print(f"{out / 'bench.md'} written in {document['duration_seconds']:.0f} s")
 
 
 if __name__ == "__main__":
