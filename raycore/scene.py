@@ -40,7 +40,12 @@ class Scene:
     dtype : {"float32", "float64"}
         Precision of the stored geometry and of every kernel.
     bins, max_leaf_size, traversal_cost, intersection_cost
-        SAH build parameters (see :class:`raycore.bvh.build.BuildParams`).
+        SAH build parameters of the meshes' trees (see :class:`raycore.bvh.build.BuildParams`).
+        A mesh's leaf triangles are tested four at a time, so a triangle costs less than a node
+        visit: leaves of up to 8 at 0.4 made trees of 73 B per triangle that traced nefertiti's
+        camera rays 11 % and its random rays 28 % faster than leaves of up to 4 at 1.0 (one
+        thread).  The top-level tree over objects, each tested on its own, keeps the default
+        costs, with ``bins``.
 
     Examples
     --------
@@ -51,8 +56,8 @@ class Scene:
     (4.0, 0, [0.0, 0.0, -1.0])
     """
 
-    def __init__(self, dtype="float32", *, bins=16, max_leaf_size=4, traversal_cost=1.0,
-                 intersection_cost=1.0):
+    def __init__(self, dtype="float32", *, bins=16, max_leaf_size=8, traversal_cost=1.0,
+                 intersection_cost=0.4):
         self.dtype = resolve_dtype(dtype)
         self._kernel_dtype = np.dtype(self.dtype)
         self.build_params = BuildParams(bins, max_leaf_size, traversal_cost, intersection_cost)
@@ -199,7 +204,8 @@ class Scene:
             # instance boxes are computed from rounded transforms: pad them by a few ulps
             span = np.maximum(np.abs(lo[finite]), np.abs(hi[finite])).max(axis=1, keepdims=True)
             pad = 64 * np.finfo(self.dtype).eps * span
-            self._top = build_bvh(lo[finite] - pad, hi[finite] + pad, self.build_params)
+            self._top = build_bvh(lo[finite] - pad, hi[finite] + pad,
+                                  BuildParams(bins=self.build_params.bins))
         if len(bounded) > 1:
             top = (self._top.nodes, self._top.refs, bounded[self._top.order], visible[~finite])
         else:
