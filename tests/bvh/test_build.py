@@ -1,6 +1,8 @@
 """The binned SAH build: structure, containment, parameters, reported quality, threads and
 degenerate input."""
 
+from dataclasses import replace
+
 import numba
 import numpy as np
 import pytest
@@ -18,6 +20,7 @@ from raycore.bvh.build import (
     records_from_bounds,
 )
 from raycore.bvh.layout import COUNTS, REFS, WIDTH, build_bvh
+from raycore.bvh.simd import LANES
 from raycore.mesh import Mesh
 
 
@@ -50,6 +53,19 @@ def walk(bvh, internal=None):
                 if internal is not None:
                     internal.append((lo, hi))
                 stack.append((ref, lo, hi))
+
+
+def unpacked(mesh):
+    """A built mesh's tree with its leaves pointing into a leaf order again, as the build made
+    it: the blocks' face indices in slot order, padding left out (raycore.bvh.leaves)."""
+    real = mesh.slot_face >= 0
+    position = np.cumsum(real) - 1  # of each slot, in the order without padding
+    refs = mesh.bvh.refs.copy()
+    firsts = refs[:, REFS:REFS + WIDTH]
+    leaf = refs[:, COUNTS:COUNTS + WIDTH] > 0
+    firsts[leaf] = position[LANES * firsts[leaf]]
+    return replace(mesh.bvh, nodes=refs.view(np.float32), refs=refs,
+                   order=mesh.slot_face[real].astype(np.int64))
 
 
 def check_leaves(bvh, lo, hi, max_leaf_size):
@@ -215,9 +231,12 @@ def test_mesh_leaves_hold_each_triangle_as_the_scene_stores_it(dtype):
     mesh.build(np.dtype(dtype), params)
     stored = vertices.astype(dtype)
     corners = stored[faces]  # (F, 3, 3), a reference built without the compiled passes
-    check_leaves(mesh.bvh, corners.min(axis=1), corners.max(axis=1), params.max_leaf_size)
-    assert mesh.leaf_vertices.dtype == np.dtype(dtype)
-    assert np.array_equal(mesh.leaf_vertices, corners[mesh.bvh.order].reshape(-1, 9))
+    check_leaves(unpacked(mesh), corners.min(axis=1), corners.max(axis=1), params.max_leaf_size)
+    assert mesh.leaf_blocks.dtype == np.dtype(dtype)
+    slots = np.flatnonzero(mesh.slot_face >= 0)
+    # block b holds value j (a.x, a.y, ..., c.z) of lane l at [b, j * LANES + l]
+    stored_corners = mesh.leaf_blocks.reshape(-1, 9, LANES)[slots // LANES, :, slots % LANES]
+    assert np.array_equal(stored_corners, corners[mesh.slot_face[slots]].reshape(-1, 9))
     assert np.array_equal(mesh.bvh.lo, stored.min(axis=0))
     lo, hi = mesh.bounds
     assert np.array_equal(lo, vertices.min(axis=0)) and np.array_equal(hi, vertices.max(axis=0))
@@ -248,7 +267,7 @@ def test_a_mesh_of_identical_triangles_builds_and_answers():
     mesh.build(np.dtype("float32"), params)
     lo = np.zeros((count, 3))
     hi = np.tile([1.0, 1, 0], (count, 1))
-    check_leaves(mesh.bvh, lo, hi, params.max_leaf_size)
+    check_leaves(unpacked(mesh), lo, hi, params.max_leaf_size)
     assert mesh.bvh.depth <= np.ceil(np.log2(count))
     scene = Scene()
     scene.add_mesh(vertices, faces)
