@@ -11,7 +11,7 @@ import sys
 
 from numba.core import event
 
-MESSAGE = ("raycore: compiling kernels for this CPU, once (about half a minute; later runs load "
+MESSAGE = ("raycore: compiling kernels for this CPU, once (a minute or two; later runs load "
            "them from Numba's cache, and `raycore warmup` compiles them all ahead of use)")
 
 
