@@ -191,14 +191,7 @@ def ray_arrays(origins, directions, tmin, tmax, dtype):
     """
     if not (_ready(origins, dtype) and _ready(directions, dtype)
             and origins.shape == directions.shape):
-        origins = _real_array(origins, "origins", (None, 3))
-        directions = _real_array(directions, "directions", (len(origins), 3))
-        if all(array.dtype == dtype and not array.flags.c_contiguous
-               for array in (origins, directions)):
-            origins, directions, _ = _gather_rays(origins, directions)
-        else:
-            origins = _converted(origins, dtype)
-            directions = _converted(directions, dtype)
+        origins, directions, _ = _contiguous_rays(origins, directions, dtype)
     count = len(origins)
     return (origins, directions, _as_bound(tmin, "tmin", count, dtype),
             _as_bound(tmax, "tmax", count, dtype))
@@ -214,6 +207,19 @@ def refuse(origins, directions, tmin, tmax, dtype):
     """Raise the ``ValueError`` that says what is wrong with a batch the compiled pass refused."""
     prepare_rays(origins, directions, tmin, tmax, dtype)
     raise AssertionError("the compiled pass refused a batch that prepare_rays accepts")
+
+
+def _contiguous_rays(origins, directions, dtype):
+    """``origins`` and ``directions`` checked for shape and converted to C-contiguous (N, 3)
+    arrays of ``dtype``, and each ray's status when the conversion found it: strided rays of the
+    right precision (the columns of an (N, 6) table) are gathered by one compiled pass that
+    checks them too; other conversions leave the status None."""
+    origins = _real_array(origins, "origins", (None, 3))
+    directions = _real_array(directions, "directions", (len(origins), 3))
+    if all(array.dtype == dtype and not array.flags.c_contiguous
+           for array in (origins, directions)):
+        return _gather_rays(origins, directions)
+    return _converted(origins, dtype), _converted(directions, dtype), None
 
 
 def prepare_rays(origins, directions, tmin=0.0, tmax=np.inf, dtype=np.float64):
@@ -239,16 +245,9 @@ def prepare_rays(origins, directions, tmin=0.0, tmax=np.inf, dtype=np.float64):
         Naming ``origins``, ``directions``, ``tmin`` or ``tmax``: wrong shape or dtype, NaN or inf
         coordinates, zero-length directions, NaN bounds.
     """
-    # finiteness is checked with the zero directions, in one compiled pass, which also makes
-    # strided rays of the right precision (the columns of an (N, 6) table) contiguous
-    origins = _real_array(origins, "origins", (None, 3))
-    directions = _real_array(directions, "directions", (len(origins), 3))
-    if all(array.dtype == dtype and not array.flags.c_contiguous
-           for array in (origins, directions)):
-        origins, directions, status = _gather_rays(origins, directions)
-    else:
-        origins = _converted(origins, dtype)
-        directions = _converted(directions, dtype)
+    # finiteness is checked with the zero directions, in one compiled pass
+    origins, directions, status = _contiguous_rays(origins, directions, dtype)
+    if status is None:
         status = _ray_status(origins, directions)
     if status.any():
         bad = np.flatnonzero(status)

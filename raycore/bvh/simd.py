@@ -14,6 +14,15 @@ from numba.extending import intrinsic
 WIDTH = 8
 
 
+def _splat(builder, vector, value):
+    """A ``vector`` with ``value`` in every lane."""
+    lanes = vector.count
+    one = builder.insert_element(ir.Constant(vector, ir.Undefined), value,
+                                 ir.Constant(ir.IntType(32), 0))
+    return builder.shuffle_vector(one, ir.Constant(vector, ir.Undefined),
+                                  ir.Constant(ir.VectorType(ir.IntType(32), lanes), [0] * lanes))
+
+
 @intrinsic
 def enter8(typingctx, nodes, row, ox, oy, oz, ix, iy, iz, fx, fy, fz, tmin, tmax, entry):
     """Test a ray against the eight child boxes of wide node ``row``.
@@ -48,11 +57,7 @@ def enter8(typingctx, nodes, row, ox, oy, oz, ix, iy, iz, fx, fy, fz, tmin, tmax
             planes = [builder.fpext(plane, vector) for plane in planes]
 
         def splat(value):
-            one = builder.insert_element(ir.Constant(vector, ir.Undefined), value,
-                                         ir.Constant(ir.IntType(32), 0))
-            return builder.shuffle_vector(one, ir.Constant(vector, ir.Undefined),
-                                          ir.Constant(ir.VectorType(ir.IntType(32), WIDTH),
-                                                      [0] * WIDTH))
+            return _splat(builder, vector, value)
 
         zero = ir.Constant(scalar, 0.0)
         t_near = splat(tmin_v)
@@ -134,11 +139,7 @@ def watertight4(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tm
                   for k in range(9)]
 
         def splat(value):
-            one = builder.insert_element(ir.Constant(vector, ir.Undefined), value,
-                                         ir.Constant(ir.IntType(32), 0))
-            return builder.shuffle_vector(one, ir.Constant(vector, ir.Undefined),
-                                          ir.Constant(ir.VectorType(ir.IntType(32), LANES),
-                                                      [0] * LANES))
+            return _splat(builder, vector, value)
 
         def pick(k, x, y, z):
             # component k (a per-ray axis, 0..2) of the vector triple (x, y, z)

@@ -1,8 +1,10 @@
 """Scene odds and ends: empty scenes, no rays, changes after a query, result types, bounds."""
 
 import numpy as np
+import pytest
 
 from raycore import AllHits, Hits, Scene
+from raycore.bvh.traverse import HIT_CAPACITY
 
 RAYS = (np.zeros((3, 3)), np.array([[0.0, 0, 1], [0, 1, 0], [1, 0, 0]]))
 
@@ -70,3 +72,26 @@ def test_ids_are_the_add_order_and_results_have_fixed_types(dtype):
     assert all_hits.offsets.tolist() == [0, 11]
     hits = scene.intersect([[0, 0, 0]], [[0, 0, 1]], tmin=[4.5], tmax=[100.0])
     assert hits.geom_id.tolist() == [1] and hits.t.tolist() == [6.0]
+
+
+def test_a_ray_crossing_more_surfaces_than_a_thread_lists_at_first(dtype):
+    # 100 parallel squares in one mesh: more crossings than HIT_CAPACITY, so that count and
+    # intersect_all run again with room for them all
+    layers = 100
+    assert layers > HIT_CAPACITY
+    z = np.repeat(np.arange(layers, dtype=float), 4)
+    square = np.tile([[0.0, 0], [1, 0], [0, 1], [1, 1]], (layers, 1))
+    vertices = np.column_stack([square, z])
+    base = 4 * np.arange(layers)[:, None, None]
+    faces = (base + np.array([[0, 1, 2], [1, 3, 2]])).reshape(-1, 3)
+    scene = Scene(dtype)
+    scene.add_mesh(vertices, faces)
+    origins = [[0.3, 0.3, -1.0], [0.7, 0.1, 200.0], [5.0, 5.0, -1.0]]
+    directions = [[0, 0, 1.0], [0, 0, -1.0], [0, 0, 1.0]]
+    assert scene.count(origins, directions).tolist() == [layers, layers, 0]
+    all_hits = scene.intersect_all(origins, directions)
+    assert all_hits.counts.tolist() == [layers, layers, 0]
+    # sorted by t, each within a few roundings of the exact distance
+    close = dict(rel=4 * float(np.finfo(dtype).eps))
+    assert all_hits.t[:layers].tolist() == pytest.approx(np.arange(1.0, layers + 1), **close)
+    assert all_hits.t[layers:].tolist() == pytest.approx(np.arange(101.0, 201.0), **close)
