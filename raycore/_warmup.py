@@ -11,10 +11,12 @@ ray, a few and thousands (kernels may take other paths by size); camera rays, ev
 of a render, and ray origins offset from hits.
 """
 
+import math
 import time
 
 import numpy as np
 
+from raycore.bvh.build import PARALLEL_BINNING
 from raycore.camera import orthographic_rays, perspective_rays
 from raycore.hits import SURFACE_FIELDS
 from raycore.offset import offset_ray_origin
@@ -53,6 +55,7 @@ def warm_up(dtypes=DTYPES, report=print):
         _ray_forms(everything)
         _renders(everything)
         _offsets(everything)
+        _large_build(dtype)
         report(f"raycore warmup: {dtype} kernels ready in {time.perf_counter() - began:.1f} s")
     return time.perf_counter() - started
 
@@ -109,6 +112,17 @@ def _everything_scene(dtype):
     _add_shapes(scene)
     _add_meshes(scene)
     return scene
+
+
+def _large_build(dtype):
+    """Build a mesh large enough for every path of the parallel build: its root is binned on
+    all cores (more than PARALLEL_BINNING triangles) and its subtrees are built and collapsed as
+    tasks.  Small meshes never reach those kernels, and an upload of a large one would compile
+    them in the service."""
+    size = math.isqrt(PARALLEL_BINNING // 2) + 1  # 2 * size**2 triangles
+    scene = Scene(dtype=dtype)
+    scene.add_mesh(*_grid_mesh(size))
+    scene.intersect(*_rays(13, dtype))
 
 
 def _scenes(dtype):
