@@ -9,7 +9,8 @@ prebuilt tensors, then ``cast_rays`` (Embree builds on commit, at the first quer
 Memory: one fresh process per contender.  It loads the mesh and warms up on a small one, then
 resets the kernel's peak-RSS counter (``/proc/self/clear_refs``, Linux only), builds, and reads
 the peak (``VmHWM``).  The build's temporaries are the peak minus the resident memory before the
-build minus the finished tree (``Scene.stats()["bytes"]``).
+build minus the finished tree (``Scene.stats()["bytes"]``).  ``raycore-mesh`` is the mesh's own
+build (``Mesh.build``) without the scene's packing of every mesh into shared arrays.
 
 Run: ``python -m benchmarks.build_memory MESH [MESH ...] [--dtype float32] [--rounds 3]``, where
 MESH is a mesh file trimesh reads or an ``.npz`` with ``vertices`` and ``faces``.
@@ -53,6 +54,16 @@ def raycore_build(vertices, faces, dtype, origins, directions):
     scene.add_mesh(vertices, faces)
     scene.intersect(origins, directions)
     return scene
+
+
+def mesh_build(vertices, faces, dtype, origins, directions):
+    """A mesh's own BVH, built as a scene builds it but without the scene's packing."""
+    from raycore.bvh.build import BuildParams
+    from raycore.mesh import Mesh
+
+    mesh = Mesh(vertices, faces)
+    mesh.build(np.dtype(dtype), BuildParams())
+    return mesh
 
 
 def open3d_inputs(vertices, faces, origins, directions):
@@ -117,10 +128,10 @@ def measure_memory(path, dtype, contender):
     vertices, faces = load(path)
     origins, directions = one_ray(vertices)
     warm_up(dtype)
-    if contender == "raycore":
+    if contender in ("raycore", "raycore-mesh"):
         inputs = (vertices.astype(dtype), faces, dtype, origins.astype(dtype),
                   directions.astype(dtype))
-        build = raycore_build
+        build = raycore_build if contender == "raycore" else mesh_build
     else:
         inputs = open3d_inputs(vertices, faces, origins, directions)
         build = open3d_build
@@ -131,8 +142,8 @@ def measure_memory(path, dtype, contender):
     peak = _rss_kib("VmHWM")
     result = {"triangles": len(faces), "contender": contender,
               "peak_over_before_MiB": (peak - before) / 1024}
-    if contender == "raycore":
-        tree = scene.stats()["bytes"]
+    if contender != "open3d":
+        tree = scene.stats()["bytes"] if contender == "raycore" else scene.nbytes
         temporaries = (peak - before) * 1024 - tree
         result.update(tree_bytes_per_triangle=tree / len(faces),
                       temporaries_bytes_per_triangle=temporaries / len(faces),
@@ -146,7 +157,8 @@ def main(argv=None):
     parser.add_argument("--dtype", default="float32", choices=["float32", "float64"])
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--memory-only", action="store_true")
-    parser.add_argument("--measure-memory", choices=["raycore", "open3d"], help=argparse.SUPPRESS)
+    parser.add_argument("--measure-memory", choices=["raycore", "raycore-mesh", "open3d"],
+                        help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.measure_memory:
         print(json.dumps(measure_memory(args.meshes[0], args.dtype, args.measure_memory)))
@@ -155,7 +167,7 @@ def main(argv=None):
         row = {"mesh": path, "dtype": args.dtype}
         if not args.memory_only:
             row.update(time_builds(path, args.dtype, args.rounds))
-        for contender in ("raycore", "open3d"):
+        for contender in ("raycore", "raycore-mesh", "open3d"):
             out = subprocess.run(
                 [sys.executable, "-m", "benchmarks.build_memory", path, "--dtype", args.dtype,
                  "--measure-memory", contender], capture_output=True, text=True, check=True)

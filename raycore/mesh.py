@@ -127,9 +127,10 @@ class Mesh:
         if self._built_for == (dtype, params):
             return
         start = time.perf_counter()
-        # bound the triangles as the kernels will see them, after rounding to dtype
+        # bound the triangles as the kernels will see them, after rounding to dtype; rounding
+        # is monotonic, so the rounded bounds are the bounds of the rounded vertices
         vertices = self.vertices.astype(dtype, copy=False)
-        lo, hi = referenced_bounds(vertices, self.faces)
+        lo, hi = (bound.astype(dtype).astype(np.float64) for bound in self.bounds)
         # let a rebuild's old tree go before the new one takes memory
         self.bvh = self.leaf_vertices = self._built_for = None
         self.bvh = build_bvh_from_records(triangle_records(vertices, self.faces), lo, hi, params)

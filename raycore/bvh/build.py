@@ -55,8 +55,9 @@ def _bins_for(size, bins):
     buckets would cost more to fill and sweep than its primitives (Embree uses 4 + size / 20).
     On the shared meshes this kept the SAH cost within 0.1% and took a fifth off the build."""
     return min(bins, 2 + size // 4)
-#: Nodes larger than this are binned by all cores together, in chunks of this many primitives.
-PARALLEL_BINNING = 65536
+#: Records per work item of the top phase: its nodes are binned and partitioned in chunks of
+#: this many records, all of one depth's nodes in one parallel step.
+CHUNK = 65536
 
 
 @dataclass(frozen=True)
@@ -172,33 +173,6 @@ def _bin_range(prims, start, end, cbox, scale, bins, counts, boxes):
     last = np.float32(bins - 1)
     for i in range(start, end):
         bin_record(prims, i, cbox, scale, last, counts, boxes)
-
-
-@njit(cache=True, parallel=True)
-def _bin_parallel(prims, start, end, cbox, scale, bins, counts, boxes):
-    """:func:`_bin_range` over chunks on all cores, then merged (sums, minima and maxima do not
-    depend on the order they are taken in).  Each chunk fills buckets of its own, allocated in
-    its thread: buckets of neighbouring chunks in one array share cache lines, and binning
-    into them ran ten times slower on two cores than on one."""
-    chunks = (end - start + PARALLEL_BINNING - 1) // PARALLEL_BINNING
-    chunk_counts = np.empty((chunks, 3, bins), np.int64)
-    chunk_boxes = np.empty((chunks, 3, bins, 8), np.float32)
-    for c in prange(chunks):
-        own_counts, own_boxes = _new_bins(bins)
-        _clear_bins(own_counts, own_boxes, bins)
-        _bin_range(prims, start + c * PARALLEL_BINNING,
-                   min(end, start + (c + 1) * PARALLEL_BINNING), cbox, scale, bins, own_counts,
-                   own_boxes)
-        chunk_counts[c] = own_counts
-        chunk_boxes[c] = own_boxes
-    _clear_bins(counts, boxes, bins)
-    for c in range(chunks):
-        for a in range(3):
-            for b in range(bins):
-                counts[a, b] += chunk_counts[c, a, b]
-                for k in range(3):
-                    boxes[a, b, k] = min(boxes[a, b, k], chunk_boxes[c, a, b, k])
-                    boxes[a, b, 3 + k] = max(boxes[a, b, 3 + k], chunk_boxes[c, a, b, 3 + k])
 
 
 @njit(cache=True, inline="always")
@@ -353,66 +327,6 @@ def _partition(prims, start, end, axis, bucket, cmin, scale, last, sides):
     return j
 
 
-@njit(cache=True, parallel=True)
-def _partition_parallel(prims, start, end, axis, bucket, cmin, scale, last, sides):
-    """:func:`_partition` on all cores: each chunk of PARALLEL_BINNING records is partitioned
-    on its own, then the right records left of the boundary trade places with the left records
-    right of it, in pieces on all cores.  The chunks do not depend on the number of threads, so
-    neither does the order the records end in."""
-    n = end - start
-    chunks = (n + PARALLEL_BINNING - 1) // PARALLEL_BINNING
-    lefts = np.empty(chunks, np.int64)
-    chunk_sides = np.empty((chunks, 2, SIDE_WIDTH), np.float32)
-    for c in prange(chunks):
-        first = start + c * PARALLEL_BINNING
-        own = np.empty((2, SIDE_WIDTH), np.float32)  # see _bin_parallel
-        lefts[c] = _partition(prims, first, min(end, first + PARALLEL_BINNING), axis, bucket,
-                              cmin, scale, last, own) - first
-        chunk_sides[c] = own
-    for side in range(2):
-        _store(sides, side, _nothing())
-        for c in range(chunks):
-            for k in (0, 1, 2, CENTROIDS, CENTROIDS + 1, CENTROIDS + 2):
-                sides[side, k] = min(sides[side, k], chunk_sides[c, side, k])
-                sides[side, 3 + k] = max(sides[side, 3 + k], chunk_sides[c, side, 3 + k])
-    mid = start + lefts.sum()
-    # runs of misplaced records, in order: right records before mid, left records from mid on
-    wrong_right = np.empty((chunks, 2), np.int64)  # (first record, count)
-    wrong_left = np.empty((chunks, 2), np.int64)
-    for c in range(chunks):
-        first = start + c * PARALLEL_BINNING
-        split = first + lefts[c]
-        stop = min(end, first + PARALLEL_BINNING)
-        wrong_right[c, 0] = split
-        wrong_right[c, 1] = max(0, min(stop, mid) - split)
-        wrong_left[c, 0] = max(first, mid)
-        wrong_left[c, 1] = max(0, split - max(first, mid))
-    right_before = np.cumsum(wrong_right[:, 1]) - wrong_right[:, 1]
-    left_before = np.cumsum(wrong_left[:, 1]) - wrong_left[:, 1]
-    moves = wrong_right[:, 1].sum()
-    pieces = (moves + PARALLEL_BINNING - 1) // PARALLEL_BINNING
-    for piece in prange(pieces):
-        k = piece * PARALLEL_BINNING
-        stop = min(moves, k + PARALLEL_BINNING)
-        a = np.searchsorted(right_before, k, side="right") - 1
-        b = np.searchsorted(left_before, k, side="right") - 1
-        i = wrong_right[a, 0] + k - right_before[a]
-        j = wrong_left[b, 0] + k - left_before[b]
-        while k < stop:
-            while i >= wrong_right[a, 0] + wrong_right[a, 1]:
-                a += 1
-                i = wrong_right[a, 0]
-            while j >= wrong_left[b, 0] + wrong_left[b, 1]:
-                b += 1
-                j = wrong_left[b, 0]
-            for f in range(PRIM_WIDTH):
-                prims[i, f], prims[j, f] = prims[j, f], prims[i, f]
-            i += 1
-            j += 1
-            k += 1
-    return mid
-
-
 @njit(cache=True)
 def _bound_range(prims, start, end, sides, side):
     """Box and centroid box of primitives ``start:end`` into ``sides[side]``."""
@@ -426,11 +340,11 @@ def _bound_range(prims, start, end, sides, side):
 def _bound_all(prims):
     """A side (SIDE_WIDTH,) float32 holding all primitives, in chunks on all cores."""
     n = prims.shape[0]
-    chunks = max(1, (n + PARALLEL_BINNING - 1) // PARALLEL_BINNING)
+    chunks = max(1, (n + CHUNK - 1) // CHUNK)
     parts = np.empty((chunks, SIDE_WIDTH), np.float32)
     for c in prange(chunks):
-        own = np.empty((1, SIDE_WIDTH), np.float32)  # not a row of parts: see _bin_parallel
-        _bound_range(prims, c * PARALLEL_BINNING, min(n, (c + 1) * PARALLEL_BINNING), own, 0)
+        own = np.empty((1, SIDE_WIDTH), np.float32)  # not a row of parts: see _bin_items
+        _bound_range(prims, c * CHUNK, min(n, (c + 1) * CHUNK), own, 0)
         parts[c] = own[0]
     acc = np.empty((1, SIDE_WIDTH), np.float32)
     _store(acc, 0, _nothing())
@@ -556,10 +470,140 @@ def _build_tasks(prims, nodes, refs, tasks, task_cbox, task_base, schedule, bins
                                     task_cbox[t], tasks[t, 3], task_base[t], bins, costs)
 
 
+@njit(cache=True, parallel=True)
+def _bin_items(prims, items, cboxes, scales, bins):
+    """Bin every work item (``items`` rows: first record, end, node) with its node's centroid
+    box and scale, on all cores: (counts (I, 3, bins) int64, boxes (I, 3, bins, 8) float32).
+
+    Each item fills buckets of its own, allocated in its thread, and copies them out once:
+    buckets of neighbouring items in one array share cache lines, and binning into them ran ten
+    times slower on two cores than on one.
+    """
+    counts = np.empty((len(items), 3, bins), np.int64)
+    boxes = np.empty((len(items), 3, bins, 8), np.float32)
+    for i in prange(len(items)):
+        node = items[i, 2]
+        own_counts, own_boxes = _new_bins(bins)
+        _clear_bins(own_counts, own_boxes, bins)
+        _bin_range(prims, items[i, 0], items[i, 1], cboxes[node], scales[node], bins,
+                   own_counts, own_boxes)
+        counts[i] = own_counts
+        boxes[i] = own_boxes
+    return counts, boxes
+
+
 @njit(cache=True)
-def _split_top(prims, nodes, refs, bins, costs, task_size):
-    """Top phase: split nodes breadth first until none holds more than ``task_size``
-    primitives, binning the large ones on all cores.
+def _choose_splits(item_first, item_counts, item_boxes, scales, bins):
+    """Merge each node's items' buckets and choose its split: (K, 3) float64 rows of axis,
+    bucket and cost (axis -1: halve by count), as :func:`_best_split` does.  Nodes of the top
+    phase hold more than MIN_TASK records, more than any leaf, so they are always split."""
+    counts, boxes = _new_bins(bins)
+    suffix = np.empty((2, bins))
+    best = np.empty((len(item_first) - 1, 3))
+    for k in range(len(item_first) - 1):
+        _clear_bins(counts, boxes, bins)
+        for i in range(item_first[k], item_first[k + 1]):
+            for a in range(3):
+                for b in range(bins):
+                    counts[a, b] += item_counts[i, a, b]
+                    for f in range(3):
+                        boxes[a, b, f] = min(boxes[a, b, f], item_boxes[i, a, b, f])
+                        boxes[a, b, 3 + f] = max(boxes[a, b, 3 + f], item_boxes[i, a, b, 3 + f])
+        best[k, 0], best[k, 1], best[k, 2] = _best_split(counts, boxes, scales[k], bins,
+                                                          suffix)
+    return best
+
+
+@njit(cache=True, parallel=True)
+def _partition_items(prims, items, frontier, best, cboxes, scales, bins):
+    """Partition every work item on its own, on all cores, by its node's split; for a node
+    halved by count, only bound the item's records on each side of the middle.  Returns the
+    left records of each item (I,) and each item's sides (I, 2, SIDE_WIDTH)."""
+    lefts = np.empty(len(items), np.int64)
+    item_sides = np.empty((len(items), 2, SIDE_WIDTH), np.float32)
+    last = np.float32(bins - 1)
+    for i in prange(len(items)):
+        first, stop, k = items[i, 0], items[i, 1], items[i, 2]
+        own = np.empty((2, SIDE_WIDTH), np.float32)  # see _bin_items
+        axis = int(best[k, 0])
+        if axis >= 0:
+            lefts[i] = _partition(prims, first, stop, axis, int(best[k, 1]), cboxes[k, axis],
+                                  scales[k, axis], last, own) - first
+        else:
+            mid = (frontier[k, 1] + frontier[k, 2]) // 2
+            lefts[i] = min(max(mid - first, 0), stop - first)
+            _bound_range(prims, first, first + lefts[i], own, 0)
+            _bound_range(prims, first + lefts[i], stop, own, 1)
+        item_sides[i] = own
+    return lefts, item_sides
+
+
+@njit(cache=True)
+def _misplaced_runs(items, item_first, lefts, frontier, best):
+    """Where each node's items put records on the wrong side of the node's boundary: per item
+    (first record, count) of right records before it and of left records from it on, how many
+    such records the node's earlier items hold, each node's boundary, and the swaps to make in
+    pieces of CHUNK (P, 3): node, first swap, end."""
+    runs = np.empty((len(items), 6), np.int64)  # right first, count, before; left alike
+    mids = np.empty(len(frontier), np.int64)
+    piece_count = 0
+    for k in range(len(frontier)):
+        mids[k] = frontier[k, 1] + lefts[item_first[k]:item_first[k + 1]].sum()
+        right_before = left_before = 0
+        for i in range(item_first[k], item_first[k + 1]):
+            split = items[i, 0] + lefts[i]
+            runs[i, 0] = split
+            runs[i, 1] = max(0, min(items[i, 1], mids[k]) - split) if best[k, 0] >= 0 else 0
+            runs[i, 2] = right_before
+            runs[i, 3] = max(items[i, 0], mids[k])
+            runs[i, 4] = max(0, split - max(items[i, 0], mids[k])) if best[k, 0] >= 0 else 0
+            runs[i, 5] = left_before
+            right_before += runs[i, 1]
+            left_before += runs[i, 4]
+        piece_count += (right_before + CHUNK - 1) // CHUNK
+    pieces = np.empty((piece_count, 3), np.int64)
+    p = 0
+    for k in range(len(frontier)):
+        moves = 0
+        for i in range(item_first[k], item_first[k + 1]):
+            moves += runs[i, 1]
+        for first in range(0, moves, CHUNK):
+            pieces[p, 0], pieces[p, 1], pieces[p, 2] = k, first, min(moves, first + CHUNK)
+            p += 1
+    return runs, mids, pieces
+
+
+@njit(cache=True, parallel=True)
+def _swap_pieces(prims, runs, item_first, pieces):
+    """Trade the misplaced records of each node (see :func:`_misplaced_runs`), the k-th right
+    record before its boundary with the k-th left record after it, in pieces on all cores."""
+    for p in prange(len(pieces)):
+        k, swap, stop = pieces[p, 0], pieces[p, 1], pieces[p, 2]
+        own = runs[item_first[k]:item_first[k + 1]]
+        a = np.searchsorted(own[:, 2], swap, side="right") - 1
+        b = np.searchsorted(own[:, 5], swap, side="right") - 1
+        i = own[a, 0] + swap - own[a, 2]
+        j = own[b, 3] + swap - own[b, 5]
+        while swap < stop:
+            while i >= own[a, 0] + own[a, 1]:
+                a += 1
+                i = own[a, 0]
+            while j >= own[b, 3] + own[b, 4]:
+                b += 1
+                j = own[b, 3]
+            for f in range(PRIM_WIDTH):
+                prims[i, f], prims[j, f] = prims[j, f], prims[i, f]
+            i += 1
+            j += 1
+            swap += 1
+
+
+def _split_top(prims, nodes, refs, bins, task_size):
+    """Top phase: split nodes one depth at a time until none holds more than ``task_size``
+    primitives.  Each depth's nodes are cut into work items of CHUNK records, and each step
+    (binning, partitioning, then trading misplaced records) runs over every item of the depth
+    on all cores: three parallel steps per depth, not per node, since a parallel step costs a
+    thread switch when another process holds a core.
 
     Returns
     -------
@@ -570,53 +614,55 @@ def _split_top(prims, nodes, refs, bins, costs, task_size):
     made : int
         Nodes numbered so far (0 .. made - 1), or -1 when the tree would pass MAX_DEPTH.
     """
-    n = prims.shape[0]
-    counts, boxes = _new_bins(bins)
-    suffix = np.empty((2, bins))
-    sides = np.empty((2, SIDE_WIDTH), np.float32)
-    cbox = np.empty(6, np.float32)
-    scale = np.zeros(4, np.float32)
-    sides[0] = _bound_all(prims)
-    nodes[0, 0:6] = sides[0, 0:6]
-    # nodes above task_size at one depth are disjoint, so few are ever queued
-    capacity = 2 * (n // task_size + 1) * MAX_DEPTH + 2
-    queue = np.empty((capacity, 4), np.int64)  # node, start, end, depth
-    queue_cbox = np.empty((capacity, 6), np.float32)
-    _push(queue, queue_cbox, 0, 0, 0, n, 0, sides, 0)
-    head, tail = 0, 1
-    is_task = np.zeros(capacity, np.bool_)
+    root = _bound_all(prims)
+    nodes[0, 0:6] = root[0:6]
+    frontier = np.array([[0, 0, len(prims), 0]], np.int64)  # node, start, end, depth
+    cboxes = root[None, CENTROIDS:CENTROIDS + 6].copy()
+    tasks, task_cbox = [], []
     made = 1
-    while head < tail:
-        node, start, end, level = queue[head, 0], queue[head, 1], queue[head, 2], queue[head, 3]
-        cbox[:] = queue_cbox[head]
-        head += 1
-        if end - start <= task_size:
-            is_task[head - 1] = True
-            continue
-        _set_scale(cbox, bins, scale)
-        if end - start > PARALLEL_BINNING:
-            _bin_parallel(prims, start, end, cbox, scale, bins, counts, boxes)
-        else:
-            _clear_bins(counts, boxes, bins)
-            _bin_range(prims, start, end, cbox, scale, bins, counts, boxes)
-        best = _best_split(counts, boxes, scale, bins, suffix)
-        if _made_leaf(nodes, refs, node, start, end, costs, best):
-            continue
-        if best[0] >= 0 and end - start > PARALLEL_BINNING:
-            mid = _partition_parallel(prims, start, end, best[0], best[1], cbox[best[0]],
-                                      scale[best[0]], np.float32(bins - 1), sides)
-        else:
-            mid = _divide(prims, start, end, bins, best, sides, cbox, scale)
-        if level + 1 >= MAX_DEPTH:
-            made = -1
+    while len(frontier):
+        small = frontier[:, 2] - frontier[:, 1] <= task_size
+        tasks.append(frontier[small])
+        task_cbox.append(cboxes[small])
+        frontier, cboxes = frontier[~small], cboxes[~small]
+        if not len(frontier):
             break
-        _add_children(nodes, refs, node, made, sides)
-        _push(queue, queue_cbox, tail, made, start, mid, level + 1, sides, 0)
-        _push(queue, queue_cbox, tail + 1, made + 1, mid, end, level + 1, sides, 1)
-        tail += 2
-        made += 2
-    picked = np.flatnonzero(is_task)
-    return queue[picked], queue_cbox[picked], made
+        if frontier[0, 3] + 1 >= MAX_DEPTH:
+            return None, None, -1
+        scales = np.zeros((len(frontier), 4), np.float32)
+        for k in range(len(frontier)):
+            _set_scale(cboxes[k], bins, scales[k])
+        chunks = -(-(frontier[:, 2] - frontier[:, 1]) // CHUNK)
+        item_first = np.concatenate([[0], np.cumsum(chunks)])
+        node_of = np.repeat(np.arange(len(frontier)), chunks)
+        first = frontier[node_of, 1] + CHUNK * (np.arange(len(node_of)) - item_first[node_of])
+        items = np.stack([first, np.minimum(first + CHUNK, frontier[node_of, 2]), node_of], 1)
+        best = _choose_splits(item_first, *_bin_items(prims, items, cboxes, scales, bins),
+                              scales, bins)
+        lefts, item_sides = _partition_items(prims, items, frontier, best, cboxes, scales, bins)
+        runs, mids, pieces = _misplaced_runs(items, item_first, lefts, frontier, best)
+        _swap_pieces(prims, runs, item_first, pieces)
+        # children: the union of each node's items' sides
+        sides = np.stack([
+            np.minimum.reduceat(item_sides, item_first[:-1], axis=0),
+            np.maximum.reduceat(item_sides, item_first[:-1], axis=0)])
+        left_right = np.where(_LOWER, sides[0], sides[1])  # (K, 2, SIDE_WIDTH)
+        children = made + 2 * np.arange(len(frontier))
+        refs[frontier[:, 0], BINARY_REF] = children
+        refs[frontier[:, 0], BINARY_COUNT] = 0
+        nodes[children, 0:6] = left_right[:, 0, 0:6]
+        nodes[children + 1, 0:6] = left_right[:, 1, 0:6]
+        made += 2 * len(frontier)
+        depth = frontier[:, 3] + 1
+        frontier = np.stack([
+            np.stack([children, frontier[:, 1], mids, depth], 1),
+            np.stack([children + 1, mids, frontier[:, 2], depth], 1)], 1).reshape(-1, 4)
+        cboxes = left_right[:, :, CENTROIDS:CENTROIDS + 6].reshape(-1, 6)
+    return np.concatenate(tasks), np.concatenate(task_cbox), made
+
+
+#: Lanes of a side that hold minima (box lo, centroid lo): the others hold maxima.
+_LOWER = np.array([True] * 3 + [False] * 3 + [True] * 3 + [False] * 3)
 
 
 @njit(cache=True)
@@ -678,17 +724,19 @@ def build_binary_bvh(prims, bins, max_leaf_size, traversal_cost, intersection_co
     refs = nodes.view(np.int32)
     costs = np.array([max_leaf_size, traversal_cost, intersection_cost], np.float64)
     task_size = max(-(-n // TASKS), MIN_TASK)
-    tasks, task_cbox, made = _split_top(prims, nodes, refs, bins, costs, task_size)
-    deepest = np.full(len(tasks), -1, np.int64)
-    sizes = tasks[:, 2] - tasks[:, 1]
-    schedule = np.argsort(-sizes, kind="stable")
-    if made >= 0:
+    tasks, task_cbox, made = _split_top(prims, nodes, refs, bins, task_size)
+    too_deep = made < 0
+    if not too_deep:
+        sizes = tasks[:, 2] - tasks[:, 1]
+        schedule = np.argsort(-sizes, kind="stable")
         # a subtree over m primitives adds at most 2m - 2 nodes below its root
         base = made + np.concatenate([[0], np.cumsum(2 * sizes - 2)[:-1]]).astype(np.int64)
+        deepest = np.empty(len(tasks), np.int64)
         with parallel_chunksize(1):
             _build_tasks(prims, nodes, refs, tasks, task_cbox, base, schedule, bins, costs,
                          deepest)
-    if made < 0 or np.any(deepest < 0):
+        too_deep = np.any(deepest < 0)
+    if too_deep:
         raise ValueError("BVH deeper than MAX_DEPTH: the primitive bounds are degenerate")
     return BinaryBVH(nodes=nodes, depth=int(deepest.max()), top_count=int(made),
                      largest_subtree=int(sizes.max()))

@@ -9,9 +9,9 @@ from raycore import Scene
 from raycore.bvh.build import (
     BINARY_COUNT,
     BINARY_REF,
+    CHUNK,
     MAX_DEPTH,
     MIN_TASK,
-    PARALLEL_BINNING,
     PRIM_INDEX,
     BuildParams,
     build_binary_bvh,
@@ -90,7 +90,7 @@ def binary_nodes(nodes):
     return np.array(rows), np.array(depths)
 
 
-@pytest.mark.parametrize("count", [1, 2, 7, 1000, 3 * MIN_TASK, 3 * PARALLEL_BINNING])
+@pytest.mark.parametrize("count", [1, 2, 7, 1000, 3 * MIN_TASK, 3 * CHUNK])
 def test_every_primitive_lands_in_exactly_one_leaf_that_contains_it(count):
     # float64 bounds rounded outwards to float32 boxes must still contain them exactly; the
     # two largest counts go through the top phase and the subtrees built in parallel, the
