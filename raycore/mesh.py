@@ -5,8 +5,8 @@ import time
 import numpy as np
 from numba import njit, prange
 
-from raycore.bvh.build import PRIM_INDEX, PRIM_WIDTH, round_down32, round_up32
 from raycore.bvh.layout import build_bvh_from_records
+from raycore.bvh.records import PRIM_INDEX, PRIM_WIDTH, round_down32, round_up32
 from raycore.rays import as_float_array
 
 #: Faces per parallel work item of the passes over faces below.

@@ -4,18 +4,14 @@ The builder works on axis-aligned bounds of abstract primitives, so one piece se
 the triangles of a mesh and the objects (instances, analytic shapes) of a scene.  It follows
 pbrt-v4's ``BVHAggregate::buildRecursive`` (SAH buckets) and Embree's parallel binned builder,
 and splits any node whose SAH cost beats making it a leaf (tinybvh's ``c_trav`` and ``c_int`` are
-the two cost parameters).
+the two cost parameters).  It works on 32-byte float32 records (:mod:`raycore.bvh.records`),
+splitting one node at a time as :mod:`raycore.bvh.split` does.
 
-Memory is what limits the meshes a machine can build, so the build keeps one 32-byte float32
-record per primitive (its box and index, Embree's PrimRef) and partitions those records in place;
-the binary nodes are 32-byte float32 records too.  Boxes are rounded outwards to float32, so they
-stay conservative for a float64 scene.
-
-Work runs in two phases.  The top of the tree is split node by node, binning each large node on
-all cores.  Once every node left is small (at most ``F / TASKS`` primitives), those subtrees are
-built independently, one per core at a time, each numbering its nodes inside a range reserved
-for it (a subtree over n primitives has at most 2n - 1 nodes).  Nothing depends on which thread
-builds what, so the tree is the same for any number of threads.
+Work runs in two phases.  The top of the tree is split one depth at a time, every step over all
+of a depth's nodes on all cores.  Once every node left is small (at most ``F / TASKS``
+primitives), those subtrees are built independently, one per core at a time, each numbering its
+nodes inside a range reserved for it (a subtree over n primitives has at most 2n - 1 nodes).
+Nothing depends on which thread builds what, so the tree is the same for any number of threads.
 """
 
 from dataclasses import dataclass
@@ -23,40 +19,35 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, parallel_chunksize, prange
 
-from raycore.bvh.build_simd import bin_record
+from raycore.bvh.records import BINARY_COUNT, BINARY_REF, BINARY_WIDTH, PRIM_WIDTH
+from raycore.bvh.split import (
+    CENTROIDS,
+    SIDE_WIDTH,
+    best_pair_split,
+    best_split,
+    bin_range,
+    bins_for,
+    bound_range,
+    clear_bins,
+    divide,
+    empty_side,
+    made_leaf,
+    new_bins,
+    partition,
+    set_scale,
+    store_side,
+)
 
 #: Deepest tree the build may produce; traversal stacks are sized from it.
 MAX_DEPTH = 64
-
-#: Primitive record (float32, 32 bytes): box lo xyz, box hi xyz, then the primitive's index as
-#: int32 bits and one unused slot.
-PRIM_WIDTH = 8
-PRIM_INDEX = 6
-#: Binary node record (float32, 32 bytes): box lo xyz, hi xyz, then as int32 bits the first child
-#: (the second is the next record) or the first primitive of a leaf, and the leaf's size (0 for
-#: an internal node).
-BINARY_WIDTH = 8
-BINARY_REF, BINARY_COUNT = 6, 7
-
-#: Records are clamped to finite float32 (a box beyond it is widened to infinity in the final
-#: layout), so that centroids and extents never meet inf - inf.
-FLOAT32_MAX = np.float32(np.finfo(np.float32).max)
 
 #: The top phase splits nodes until none holds more than 1 / TASKS of the primitives: enough
 #: subtrees to keep every core busy to the end, few enough that each is worth a task.
 TASKS = 64
 #: Subtrees smaller than this are never split in the top phase (its per-node cost is higher).
 MIN_TASK = 4096
-
-
-@njit(cache=True, inline="always")
-def _bins_for(size, bins):
-    """Buckets for a node of ``size`` primitives: ``bins``, or fewer for a small node, whose
-    buckets would cost more to fill and sweep than its primitives (Embree uses 4 + size / 20).
-    On the shared meshes this kept the SAH cost within 0.1% and took a fifth off the build."""
-    return min(bins, 2 + size // 4)
-#: Records per work item of the top phase: its nodes are binned and partitioned in chunks of
-#: this many records, all of one depth's nodes in one parallel step.
+#: Records per work item of the top phase: each depth's nodes are binned and partitioned in
+#: chunks of this many records, enough to amortise a work item's set-up.
 CHUNK = 65536
 
 
@@ -93,305 +84,7 @@ class BuildParams:
                 raise ValueError(f"{name} must be positive and finite, got {value!r}")
 
 
-# ---------------------------------------------------------------------------- primitive records
-
-
-@njit(cache=True, inline="always")
-def round_down32(x):
-    """Largest float32 <= ``x`` (float32 or float64), clamped to [-FLOAT32_MAX, FLOAT32_MAX]."""
-    y = np.float32(x)
-    if y > x:
-        y = np.nextafter(y, np.float32(-np.inf))
-    return min(max(y, -FLOAT32_MAX), FLOAT32_MAX)
-
-
-@njit(cache=True, inline="always")
-def round_up32(x):
-    """Smallest float32 >= ``x`` (float32 or float64), clamped to [-FLOAT32_MAX, FLOAT32_MAX]."""
-    y = np.float32(x)
-    if y < x:
-        y = np.nextafter(y, np.float32(np.inf))
-    return min(max(y, -FLOAT32_MAX), FLOAT32_MAX)
-
-
-@njit(cache=True, parallel=True)
-def records_from_bounds(lo, hi):
-    """Primitive records of boxes ``lo``, ``hi`` (float32 or float64, shape (F, 3)), rounded
-    outwards to float32: an ndarray of float32, shape (F, PRIM_WIDTH)."""
-    n = lo.shape[0]
-    prims = np.empty((n, PRIM_WIDTH), np.float32)
-    index = prims.view(np.int32)
-    for p in prange(n):
-        for a in range(3):
-            prims[p, a] = round_down32(lo[p, a])
-            prims[p, 3 + a] = round_up32(hi[p, a])
-        index[p, PRIM_INDEX] = p
-        index[p, PRIM_INDEX + 1] = 0
-    return prims
-
-
-# ---------------------------------------------------------------------------- binning
-#
-# Hot loops index arrays directly rather than through views (``a[i]``, ``a[i:j]``): a view of an
-# array that several threads share changes its reference count atomically, and threads that
-# build their subtrees side by side would fight over that count's cache line.
-
-
-@njit(cache=True, inline="always")
-def _bin_of(lo, hi, cmin, scale, last):
-    """Bucket of a centroid on one axis.  The centroid is halved before adding, so that no sum
-    of finite float32 overflows; the same expression bins and partitions."""
-    return int(min((np.float32(0.5) * lo + np.float32(0.5) * hi - cmin) * scale, last))
-
-
-@njit(cache=True, inline="always")
-def _clear_bins(counts, boxes, bins):
-    for a in range(3):
-        for b in range(bins):
-            counts[a, b] = 0
-            for k in range(3):
-                boxes[a, b, k] = np.inf
-                boxes[a, b, 3 + k] = -np.inf
-
-
-@njit(cache=True)
-def _new_bins(bins):
-    """Bucket counts (3, bins) int64 and boxes (3, bins, 8) float32, whose lanes 0-5 are a box
-    (lo xyz, hi xyz) and 6-7 padding, so that a box is one vector."""
-    return np.empty((3, bins), np.int64), np.empty((3, bins, 8), np.float32)
-
-
-@njit(cache=True)
-def _bin_range(prims, start, end, cbox, scale, bins, counts, boxes):
-    """Add primitives ``start:end`` to the buckets of all three axes.
-
-    ``cbox`` (6,) is the centroid box, ``scale`` (4,) buckets per unit of centroid (float32)
-    on each axis and 0.  ``counts`` and ``boxes`` (:func:`_new_bins`) accumulate; an axis with
-    scale 0 puts everything in bucket 0.  Each record is binned as :func:`_bin_of` does, in one
-    vector step (:func:`raycore.bvh.build_simd.bin_record`).
-    """
-    last = np.float32(bins - 1)
-    for i in range(start, end):
-        bin_record(prims, i, cbox, scale, last, counts, boxes)
-
-
-@njit(cache=True, inline="always")
-def _half_area(lox, loy, loz, hix, hiy, hiz):
-    dx = np.float64(hix) - np.float64(lox)
-    dy = np.float64(hiy) - np.float64(loy)
-    dz = np.float64(hiz) - np.float64(loz)
-    return dx * dy + dy * dz + dz * dx
-
-
-@njit(cache=True)
-def _best_split(counts, boxes, scale, bins, suffix):
-    """Cheapest bucket boundary: (axis, bucket, cost) with cost = sum of the children's
-    half-areas times their primitive counts, or axis -1 when no axis has two non-empty sides.
-
-    Boundaries next to empty buckets repeat a partition already priced, so only the boundary
-    after each non-empty bucket is priced (the first of equally cheap ones wins, as in a sweep
-    over all of them).  ``suffix`` (2, bins) float64 is scratch.
-    """
-    best_axis = -1
-    best_bucket = -1
-    best_cost = np.inf
-    for a in range(3):
-        if scale[a] == 0:
-            continue
-        lx, ly, lz = np.inf, np.inf, np.inf
-        hx, hy, hz = -np.inf, -np.inf, -np.inf
-        total = 0
-        area = 0.0
-        for b in range(bins - 1, 0, -1):
-            if counts[a, b]:
-                lx, ly, lz = min(lx, boxes[a, b, 0]), min(ly, boxes[a, b, 1]), min(lz, boxes[
-                    a, b, 2])
-                hx, hy, hz = max(hx, boxes[a, b, 3]), max(hy, boxes[a, b, 4]), max(hz, boxes[
-                    a, b, 5])
-                total += counts[a, b]
-                area = _half_area(lx, ly, lz, hx, hy, hz)
-            suffix[0, b] = area
-            suffix[1, b] = total
-        lx, ly, lz = np.inf, np.inf, np.inf
-        hx, hy, hz = -np.inf, -np.inf, -np.inf
-        total = 0
-        for b in range(1, bins):
-            if counts[a, b - 1] == 0:
-                continue
-            lx, ly, lz = min(lx, boxes[a, b - 1, 0]), min(ly, boxes[a, b - 1, 1]), min(lz, boxes[
-                a, b - 1, 2])
-            hx, hy, hz = max(hx, boxes[a, b - 1, 3]), max(hy, boxes[a, b - 1, 4]), max(hz, boxes[
-                a, b - 1, 5])
-            total += counts[a, b - 1]
-            if suffix[1, b] == 0:
-                break
-            cost = _half_area(lx, ly, lz, hx, hy, hz) * total + suffix[0, b] * suffix[1, b]
-            if cost < best_cost:
-                best_cost = cost
-                best_axis = a
-                best_bucket = b
-    return best_axis, best_bucket, best_cost
-
-
-@njit(cache=True)
-def _set_scale(cbox, bins, scale):
-    """Buckets per unit of centroid on each axis into ``scale`` (3,) float32: 0 where the
-    centroids do not spread, since that axis has nothing to split."""
-    for a in range(3):
-        extent = cbox[3 + a] - cbox[a]
-        s = np.float32(0)
-        if extent > 0:
-            s = np.float32(bins) / extent
-            if not np.isfinite(s):
-                s = np.float32(0)
-        scale[a] = s
-
-
-@njit(cache=True)
-def _best_pair_split(prims, start, cbox, scale, bins):
-    """:func:`_best_split` for a node of two primitives (a third of all nodes), without buckets:
-    every axis that puts them in different buckets prices the same partition, so the first one
-    wins, as in the sweep."""
-    last = np.float32(bins - 1)
-    p, q = start, start + 1
-    for a in range(3):
-        if scale[a] == 0:
-            continue
-        key_p = _bin_of(prims[p, a], prims[p, 3 + a], cbox[a], scale[a], last)
-        key_q = _bin_of(prims[q, a], prims[q, 3 + a], cbox[a], scale[a], last)
-        if key_p != key_q:
-            cost = _half_area(prims[p, 0], prims[p, 1], prims[p, 2], prims[p, 3], prims[p, 4],
-                              prims[p, 5]) + _half_area(prims[q, 0], prims[q, 1], prims[q, 2],
-                                                        prims[q, 3], prims[q, 4], prims[q, 5])
-            return a, min(key_p, key_q) + 1, cost
-    return -1, -1, np.inf
-
-
-# ---------------------------------------------------------------------------- partition
-
-
-#: A side of a split, (12,) float32: its box (lo xyz, hi xyz), then its centroid box.
-SIDE_WIDTH = 12
-CENTROIDS = 6
-
-
-@njit(cache=True, inline="always")
-def _nothing():
-    """A side holding nothing, as a tuple of 12 float32.  Sides grow as tuples of locals, which
-    stay in registers: grown in memory, the partition ran at twice the time."""
-    inf = np.float32(np.inf)
-    return (inf, inf, inf, -inf, -inf, -inf, inf, inf, inf, -inf, -inf, -inf)
-
-
-@njit(cache=True, inline="always")
-def _grown(side, prims, i):
-    """``side`` (a tuple from :func:`_nothing`) with primitive ``i`` added: its box, and its
-    centroid 0.5 * lo + 0.5 * hi (as :func:`_bin_of` computes it) to the centroid box."""
-    lx, ly, lz, hx, hy, hz, clx, cly, clz, chx, chy, chz = side
-    half = np.float32(0.5)
-    ax, ay, az = prims[i, 0], prims[i, 1], prims[i, 2]
-    bx, by, bz = prims[i, 3], prims[i, 4], prims[i, 5]
-    cx, cy, cz = half * ax + half * bx, half * ay + half * by, half * az + half * bz
-    return (min(lx, ax), min(ly, ay), min(lz, az), max(hx, bx), max(hy, by), max(hz, bz),
-            min(clx, cx), min(cly, cy), min(clz, cz), max(chx, cx), max(chy, cy), max(chz, cz))
-
-
-@njit(cache=True, inline="always")
-def _store(sides, row, side):
-    for k in range(SIDE_WIDTH):
-        sides[row, k] = side[k]
-
-
-@njit(cache=True)
-def _partition(prims, start, end, axis, bucket, cmin, scale, last, sides):
-    """Move primitives whose bucket on ``axis`` is below ``bucket`` before the others, in place;
-    ``sides`` (2, SIDE_WIDTH) gets each side's box and centroid box.  Returns the boundary.
-
-    A branchless Lomuto partition: every record is swapped with the first right one, and the
-    boundary moves on when the record belongs left.  Deep in the tree a node's records are in
-    no useful order, so a branch on their side mispredicts half the time: Hoare's partition
-    took 13-15 ns per record there, this one 6-9.
-    """
-    j = start
-    for i in range(start, end):
-        goes_left = _bin_of(prims[i, axis], prims[i, 3 + axis], cmin, scale, last) < bucket
-        r0, r1, r2, r3 = prims[i, 0], prims[i, 1], prims[i, 2], prims[i, 3]
-        r4, r5, r6, r7 = prims[i, 4], prims[i, 5], prims[i, 6], prims[i, 7]
-        for k in range(PRIM_WIDTH):
-            prims[i, k] = prims[j, k]
-        prims[j, 0], prims[j, 1], prims[j, 2], prims[j, 3] = r0, r1, r2, r3
-        prims[j, 4], prims[j, 5], prims[j, 6], prims[j, 7] = r4, r5, r6, r7
-        j += goes_left
-    _bound_range(prims, start, j, sides, 0)
-    _bound_range(prims, j, end, sides, 1)
-    return j
-
-
-@njit(cache=True)
-def _bound_range(prims, start, end, sides, side):
-    """Box and centroid box of primitives ``start:end`` into ``sides[side]``."""
-    acc = _nothing()
-    for i in range(start, end):
-        acc = _grown(acc, prims, i)
-    _store(sides, side, acc)
-
-
-@njit(cache=True, parallel=True)
-def _bound_all(prims):
-    """A side (SIDE_WIDTH,) float32 holding all primitives, in chunks on all cores."""
-    n = prims.shape[0]
-    chunks = max(1, (n + CHUNK - 1) // CHUNK)
-    parts = np.empty((chunks, SIDE_WIDTH), np.float32)
-    for c in prange(chunks):
-        own = np.empty((1, SIDE_WIDTH), np.float32)  # not a row of parts: see _bin_items
-        _bound_range(prims, c * CHUNK, min(n, (c + 1) * CHUNK), own, 0)
-        parts[c] = own[0]
-    acc = np.empty((1, SIDE_WIDTH), np.float32)
-    _store(acc, 0, _nothing())
-    for c in range(chunks):
-        for k in (0, 1, 2, CENTROIDS, CENTROIDS + 1, CENTROIDS + 2):
-            acc[0, k] = min(acc[0, k], parts[c, k])
-            acc[0, 3 + k] = max(acc[0, 3 + k], parts[c, 3 + k])
-    return acc[0]
-
-
-# ---------------------------------------------------------------------------- nodes
-
-
-@njit(cache=True)
-def _made_leaf(nodes, refs, node, start, end, costs, best):
-    """Make ``node`` (primitives ``start:end``) a leaf and return True when that costs no more
-    than its cheapest split ``best`` (axis, bucket, cost), or when it cannot be split and fits;
-    ``costs`` is (max_leaf_size, traversal_cost, intersection_cost)."""
-    size = end - start
-    best_axis, _, best_cost = best
-    area = _half_area(nodes[node, 0], nodes[node, 1], nodes[node, 2], nodes[node, 3],
-                      nodes[node, 4], nodes[node, 5])
-    leaf_cost = costs[2] * size
-    split_cost = costs[1] + costs[2] * best_cost / area if area > 0 else np.inf
-    make_leaf = size == 1 or (size <= costs[0] and leaf_cost <= split_cost)
-    if make_leaf or (best_axis < 0 and size <= costs[0]):
-        refs[node, BINARY_REF] = start
-        refs[node, BINARY_COUNT] = size
-        return True
-    return False
-
-
-@njit(cache=True)
-def _divide(prims, start, end, bins, best, sides, cbox, scale):
-    """Partition primitives ``start:end`` at split ``best`` found with centroid box ``cbox``
-    and ``scale``, or halve them when no split separates anything; returns the boundary, and
-    leaves the children's boxes and centroid boxes in ``sides`` (2, SIDE_WIDTH)."""
-    best_axis, best_bucket, _ = best
-    if best_axis >= 0:
-        last = np.float32(bins - 1)
-        return _partition(prims, start, end, best_axis, best_bucket, cbox[best_axis],
-                          scale[best_axis], last, sides)
-    # all centroids coincide but the node is too big for a leaf: split by count
-    mid = (start + end) // 2
-    _bound_range(prims, start, mid, sides, 0)
-    _bound_range(prims, mid, end, sides, 1)
-    return mid
+# ---------------------------------------------------------------------------- subtrees
 
 
 @njit(cache=True, inline="always")
@@ -417,7 +110,7 @@ def _build_subtree(prims, nodes, refs, root, start, end, root_cbox, depth, first
     """Build the subtree of ``root`` (its box already in ``nodes``) over primitives
     ``start:end``, numbering new nodes from ``first_free``.  Returns the deepest leaf's depth, or
     -1 when the tree would pass MAX_DEPTH."""
-    counts, boxes = _new_bins(bins)
+    counts, boxes = new_bins(bins)
     suffix = np.empty((2, bins))
     sides = np.empty((2, SIDE_WIDTH), np.float32)
     cbox = np.empty(6, np.float32)
@@ -436,18 +129,18 @@ def _build_subtree(prims, nodes, refs, root, start, end, root_cbox, depth, first
         for k in range(6):
             cbox[k] = stack_cbox[top, k]
         deepest = max(deepest, level)
-        used = _bins_for(hi - lo, bins)
-        _set_scale(cbox, used, scale)
+        used = bins_for(hi - lo, bins)
+        set_scale(cbox, used, scale)
         best = (-1, -1, np.inf)
         if hi - lo == 2:
-            best = _best_pair_split(prims, lo, cbox, scale, used)
+            best = best_pair_split(prims, lo, cbox, scale, used)
         elif hi - lo > 2:
-            _clear_bins(counts, boxes, used)
-            _bin_range(prims, lo, hi, cbox, scale, used, counts, boxes)
-            best = _best_split(counts, boxes, scale, used, suffix)
-        if _made_leaf(nodes, refs, node, lo, hi, costs, best):
+            clear_bins(counts, boxes, used)
+            bin_range(prims, lo, hi, cbox, scale, used, counts, boxes)
+            best = best_split(counts, boxes, scale, used, suffix)
+        if made_leaf(nodes, refs, node, lo, hi, costs, best):
             continue
-        mid = _divide(prims, lo, hi, used, best, sides, cbox, scale)
+        mid = divide(prims, lo, hi, used, best, sides, cbox, scale)
         if level + 1 >= MAX_DEPTH:
             return -1
         _add_children(nodes, refs, node, free, sides)
@@ -470,6 +163,28 @@ def _build_tasks(prims, nodes, refs, tasks, task_cbox, task_base, schedule, bins
                                     task_cbox[t], tasks[t, 3], task_base[t], bins, costs)
 
 
+# ---------------------------------------------------------------------------- top phase
+
+
+@njit(cache=True, parallel=True)
+def _bound_all(prims):
+    """A side (SIDE_WIDTH,) float32 holding all primitives, in chunks on all cores."""
+    n = prims.shape[0]
+    chunks = max(1, (n + CHUNK - 1) // CHUNK)
+    parts = np.empty((chunks, SIDE_WIDTH), np.float32)
+    for c in prange(chunks):
+        own = np.empty((1, SIDE_WIDTH), np.float32)  # see _bin_items
+        bound_range(prims, c * CHUNK, min(n, (c + 1) * CHUNK), own, 0)
+        parts[c] = own[0]
+    acc = np.empty((1, SIDE_WIDTH), np.float32)
+    store_side(acc, 0, empty_side())
+    for c in range(chunks):
+        for k in (0, 1, 2, CENTROIDS, CENTROIDS + 1, CENTROIDS + 2):
+            acc[0, k] = min(acc[0, k], parts[c, k])
+            acc[0, 3 + k] = max(acc[0, 3 + k], parts[c, 3 + k])
+    return acc[0]
+
+
 @njit(cache=True, parallel=True)
 def _bin_items(prims, items, cboxes, scales, bins):
     """Bin every work item (``items`` rows: first record, end, node) with its node's centroid
@@ -483,9 +198,9 @@ def _bin_items(prims, items, cboxes, scales, bins):
     boxes = np.empty((len(items), 3, bins, 8), np.float32)
     for i in prange(len(items)):
         node = items[i, 2]
-        own_counts, own_boxes = _new_bins(bins)
-        _clear_bins(own_counts, own_boxes, bins)
-        _bin_range(prims, items[i, 0], items[i, 1], cboxes[node], scales[node], bins,
+        own_counts, own_boxes = new_bins(bins)
+        clear_bins(own_counts, own_boxes, bins)
+        bin_range(prims, items[i, 0], items[i, 1], cboxes[node], scales[node], bins,
                    own_counts, own_boxes)
         counts[i] = own_counts
         boxes[i] = own_boxes
@@ -495,13 +210,13 @@ def _bin_items(prims, items, cboxes, scales, bins):
 @njit(cache=True)
 def _choose_splits(item_first, item_counts, item_boxes, scales, bins):
     """Merge each node's items' buckets and choose its split: (K, 3) float64 rows of axis,
-    bucket and cost (axis -1: halve by count), as :func:`_best_split` does.  Nodes of the top
+    bucket and cost (axis -1: halve by count), as :func:`best_split` does.  Nodes of the top
     phase hold more than MIN_TASK records, more than any leaf, so they are always split."""
-    counts, boxes = _new_bins(bins)
+    counts, boxes = new_bins(bins)
     suffix = np.empty((2, bins))
     best = np.empty((len(item_first) - 1, 3))
     for k in range(len(item_first) - 1):
-        _clear_bins(counts, boxes, bins)
+        clear_bins(counts, boxes, bins)
         for i in range(item_first[k], item_first[k + 1]):
             for a in range(3):
                 for b in range(bins):
@@ -509,7 +224,7 @@ def _choose_splits(item_first, item_counts, item_boxes, scales, bins):
                     for f in range(3):
                         boxes[a, b, f] = min(boxes[a, b, f], item_boxes[i, a, b, f])
                         boxes[a, b, 3 + f] = max(boxes[a, b, 3 + f], item_boxes[i, a, b, 3 + f])
-        best[k, 0], best[k, 1], best[k, 2] = _best_split(counts, boxes, scales[k], bins,
+        best[k, 0], best[k, 1], best[k, 2] = best_split(counts, boxes, scales[k], bins,
                                                           suffix)
     return best
 
@@ -527,13 +242,13 @@ def _partition_items(prims, items, frontier, best, cboxes, scales, bins):
         own = np.empty((2, SIDE_WIDTH), np.float32)  # see _bin_items
         axis = int(best[k, 0])
         if axis >= 0:
-            lefts[i] = _partition(prims, first, stop, axis, int(best[k, 1]), cboxes[k, axis],
+            lefts[i] = partition(prims, first, stop, axis, int(best[k, 1]), cboxes[k, axis],
                                   scales[k, axis], last, own) - first
         else:
             mid = (frontier[k, 1] + frontier[k, 2]) // 2
             lefts[i] = min(max(mid - first, 0), stop - first)
-            _bound_range(prims, first, first + lefts[i], own, 0)
-            _bound_range(prims, first + lefts[i], stop, own, 1)
+            bound_range(prims, first, first + lefts[i], own, 0)
+            bound_range(prims, first + lefts[i], stop, own, 1)
         item_sides[i] = own
     return lefts, item_sides
 
@@ -631,7 +346,7 @@ def _split_top(prims, nodes, refs, bins, task_size):
             return None, None, -1
         scales = np.zeros((len(frontier), 4), np.float32)
         for k in range(len(frontier)):
-            _set_scale(cboxes[k], bins, scales[k])
+            set_scale(cboxes[k], bins, scales[k])
         chunks = -(-(frontier[:, 2] - frontier[:, 1]) // CHUNK)
         item_first = np.concatenate([[0], np.cumsum(chunks)])
         node_of = np.repeat(np.arange(len(frontier)), chunks)
@@ -662,7 +377,13 @@ def _split_top(prims, nodes, refs, bins, task_size):
 
 
 #: Lanes of a side that hold minima (box lo, centroid lo): the others hold maxima.
+
+
+#: Lanes of a side that hold minima (box lo, centroid lo): the others hold maxima.
 _LOWER = np.array([True] * 3 + [False] * 3 + [True] * 3 + [False] * 3)
+
+
+# ---------------------------------------------------------------------------- both
 
 
 @njit(cache=True)

@@ -19,13 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, parallel_chunksize, prange
 
-from raycore.bvh.build import (
+from raycore.bvh.build import BuildParams, build_binary_bvh
+from raycore.bvh.records import (
     BINARY_COUNT,
     BINARY_REF,
     FLOAT32_MAX,
     PRIM_INDEX,
-    BuildParams,
-    build_binary_bvh,
     records_from_bounds,
 )
 

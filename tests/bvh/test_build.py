@@ -6,18 +6,9 @@ import numpy as np
 import pytest
 
 from raycore import Scene
-from raycore.bvh.build import (
-    BINARY_COUNT,
-    BINARY_REF,
-    CHUNK,
-    MAX_DEPTH,
-    MIN_TASK,
-    PRIM_INDEX,
-    BuildParams,
-    build_binary_bvh,
-    records_from_bounds,
-)
+from raycore.bvh.build import CHUNK, MAX_DEPTH, MIN_TASK, BuildParams, build_binary_bvh
 from raycore.bvh.layout import COUNTS, REFS, WIDTH, build_bvh
+from raycore.bvh.records import BINARY_COUNT, BINARY_REF, PRIM_INDEX, records_from_bounds
 from raycore.mesh import Mesh
 
 
