@@ -45,7 +45,7 @@ MAX_DEPTH = 64
 #: subtrees to keep every core busy to the end, few enough that each is worth a task.
 TASKS = 64
 #: Subtrees smaller than this are never split in the top phase (its per-node cost is higher).
-MIN_TASK = 4096
+MIN_TASK = 16384
 #: Records per work item of the top phase: each depth's nodes are binned and partitioned in
 #: chunks of this many records, enough to amortise a work item's set-up.
 CHUNK = 65536

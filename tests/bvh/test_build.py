@@ -124,7 +124,7 @@ def test_boxes_beyond_float32_are_bounded_by_infinity():
     assert leaf_of[3][1][0] == np.inf and leaf_of[4][0][0] == -np.inf
 
 
-@pytest.mark.parametrize("count", [3000, 10 * MIN_TASK])
+@pytest.mark.parametrize("count", [3000, 3 * MIN_TASK])
 def test_reported_quality_matches_the_tree(count):
     lo, hi = random_boxes(count, seed=3)
     params = BuildParams(traversal_cost=1.5, intersection_cost=1.0)
@@ -170,7 +170,7 @@ def test_sah_prefers_fewer_tests_when_intersections_are_expensive():
 
 def test_the_tree_does_not_depend_on_the_number_of_threads():
     # enough primitives for the top phase to bin on all cores and leave many subtrees
-    lo, hi = random_boxes(40 * MIN_TASK, seed=11)
+    lo, hi = random_boxes(3 * CHUNK, seed=11)
     threads = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
