@@ -24,9 +24,9 @@ import time
 
 import numpy as np
 
-#: Large enough (12,946 triangles) for every phase of the build to run, so that no kernel is
+#: Large enough (69,451 triangles) for every phase of the build to run, so that no kernel is
 #: first loaded during a measured build
-WARMUP_MESH = "/work/shared/meshes/fandisk.obj"
+WARMUP_MESH = "/work/shared/meshes/stanford-bunny.obj"
 
 
 def load(path):
