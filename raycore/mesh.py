@@ -6,7 +6,13 @@ import numpy as np
 from numba import njit, prange
 
 from raycore.bvh.layout import build_bvh_from_records
-from raycore.bvh.records import PRIM_INDEX, PRIM_WIDTH, round_down32, round_up32
+from raycore.bvh.records import (
+    PRIM_INDEX,
+    PRIM_WIDTH,
+    check_primitive_count,
+    round_down32,
+    round_up32,
+)
 from raycore.rays import as_float_array
 
 #: Faces per parallel work item of the passes over faces below.
@@ -127,6 +133,7 @@ class Mesh:
         if self._built_for == (dtype, params):
             return
         start = time.perf_counter()
+        check_primitive_count(len(self.faces))
         # bound the triangles as the kernels will see them, after rounding to dtype; rounding
         # is monotonic, so the rounded bounds are the bounds of the rounded vertices
         vertices = self.vertices.astype(dtype, copy=False)

@@ -44,7 +44,9 @@ MAX_DEPTH = 64
 #: The top phase splits nodes until none holds more than 1 / TASKS of the primitives: enough
 #: subtrees to keep every core busy to the end, few enough that each is worth a task.
 TASKS = 64
-#: Subtrees smaller than this are never split in the top phase (its per-node cost is higher).
+#: Nodes of up to this many primitives are left to the subtree phase: each depth of the top
+#: phase costs three parallel steps, and a step can wait for a thread switch when another
+#: process holds a core.
 MIN_TASK = 16384
 #: Records per work item of the top phase: each depth's nodes are binned and partitioned in
 #: chunks of this many records, enough to amortise a work item's set-up.
@@ -377,13 +379,10 @@ def _split_top(prims, nodes, refs, bins, task_size):
 
 
 #: Lanes of a side that hold minima (box lo, centroid lo): the others hold maxima.
-
-
-#: Lanes of a side that hold minima (box lo, centroid lo): the others hold maxima.
 _LOWER = np.array([True] * 3 + [False] * 3 + [True] * 3 + [False] * 3)
 
 
-# ---------------------------------------------------------------------------- both
+# ---------------------------------------------------------------------------- whole tree
 
 
 @njit(cache=True)
@@ -427,7 +426,7 @@ def build_binary_bvh(prims, bins, max_leaf_size, traversal_cost, intersection_co
     Parameters
     ----------
     prims : ndarray of float32, shape (F, PRIM_WIDTH)
-        Primitive records (see :func:`records_from_bounds`); on return, in leaf order.
+        Primitive records (:mod:`raycore.bvh.records`); on return, in leaf order.
     bins, max_leaf_size : int
     traversal_cost, intersection_cost : float
 

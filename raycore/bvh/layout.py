@@ -25,6 +25,7 @@ from raycore.bvh.records import (
     BINARY_REF,
     FLOAT32_MAX,
     PRIM_INDEX,
+    check_primitive_count,
     records_from_bounds,
 )
 
@@ -278,8 +279,7 @@ def build_bvh_from_records(prims, lo, hi, params=None):
     params : BuildParams, optional
     """
     params = params or BuildParams()
-    if len(prims) == 0:
-        raise ValueError("cannot build a BVH over zero primitives")
+    check_primitive_count(len(prims))
     binary = build_binary_bvh(
         prims, int(params.bins), int(params.max_leaf_size), float(params.traversal_cost),
         float(params.intersection_cost))
@@ -308,7 +308,6 @@ def build_bvh(lo, hi, params=None):
     with :class:`BuildParams` (defaults when None)."""
     lo = np.ascontiguousarray(lo, dtype=np.float64)
     hi = np.ascontiguousarray(hi, dtype=np.float64)
-    if len(lo) == 0:
-        raise ValueError("cannot build a BVH over zero primitives")
+    check_primitive_count(len(lo))
     return build_bvh_from_records(records_from_bounds(lo, hi), lo.min(axis=0), hi.max(axis=0),
                                   params)

@@ -19,6 +19,10 @@ PRIM_INDEX = 6
 BINARY_WIDTH = 8
 BINARY_REF, BINARY_COUNT = 6, 7
 
+#: Most primitives one BVH holds: indices and node references are int32, and a binary tree over
+#: F primitives has up to 2F - 1 nodes.
+MAX_PRIMITIVES = 2**30
+
 #: Records are clamped to finite float32 (a box beyond it is widened to infinity in the final
 #: layout), so that centroids and extents never meet inf - inf.
 FLOAT32_MAX = np.float32(np.finfo(np.float32).max)
@@ -58,8 +62,9 @@ def records_from_bounds(lo, hi):
     return prims
 
 
-# ---------------------------------------------------------------------------- binning
-#
-# Hot loops index arrays directly rather than through views (``a[i]``, ``a[i:j]``): a view of an
-# array that several threads share changes its reference count atomically, and threads that
-# build their subtrees side by side would fight over that count's cache line.
+def check_primitive_count(count):
+    """Raise ``ValueError`` unless a BVH can hold ``count`` primitives."""
+    if count == 0:
+        raise ValueError("cannot build a BVH over zero primitives")
+    if count > MAX_PRIMITIVES:
+        raise ValueError(f"cannot build a BVH over {count} primitives: at most {MAX_PRIMITIVES}")

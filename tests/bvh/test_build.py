@@ -8,7 +8,14 @@ import pytest
 from raycore import Scene
 from raycore.bvh.build import CHUNK, MAX_DEPTH, MIN_TASK, BuildParams, build_binary_bvh
 from raycore.bvh.layout import COUNTS, REFS, WIDTH, build_bvh
-from raycore.bvh.records import BINARY_COUNT, BINARY_REF, PRIM_INDEX, records_from_bounds
+from raycore.bvh.records import (
+    BINARY_COUNT,
+    BINARY_REF,
+    MAX_PRIMITIVES,
+    PRIM_INDEX,
+    check_primitive_count,
+    records_from_bounds,
+)
 from raycore.mesh import Mesh
 
 
@@ -245,6 +252,15 @@ def test_a_mesh_of_identical_triangles_builds_and_answers():
     scene.add_mesh(vertices, faces)
     hits = scene.intersect([[0.25, 0.25, 1.0]], [[0, 0, -1.0]])
     assert hits.t.tolist() == [1.0] and 0 <= hits.prim_id[0] < count
+
+
+def test_primitive_counts_the_tree_cannot_hold_raise():
+    with pytest.raises(ValueError, match="zero primitives"):
+        build_bvh(np.zeros((0, 3)), np.zeros((0, 3)))
+    # int32 indices and node references: a count past MAX_PRIMITIVES is refused up front
+    check_primitive_count(MAX_PRIMITIVES)
+    with pytest.raises(ValueError, match="at most"):
+        check_primitive_count(MAX_PRIMITIVES + 1)
 
 
 @pytest.mark.parametrize("field, value", [("bins", 1), ("max_leaf_size", 0),
