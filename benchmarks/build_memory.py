@@ -21,12 +21,13 @@ import json
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 #: Large enough (69,451 triangles) for every phase of the build to run, so that no kernel is
 #: first loaded during a measured build
-WARMUP_MESH = "/work/shared/meshes/stanford-bunny.obj"
+WARMUP_MESH = Path(__file__).resolve().parents[2] / "shared" / "meshes" / "stanford-bunny.obj"
 
 
 def load(path):
