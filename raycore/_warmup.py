@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from raycore.bvh.build import PARALLEL_BINNING
+from raycore.bvh.build import MIN_TASK
 from raycore.camera import orthographic_rays, perspective_rays
 from raycore.hits import SURFACE_FIELDS
 from raycore.offset import offset_ray_origin
@@ -115,11 +115,11 @@ def _everything_scene(dtype):
 
 
 def _large_build(dtype):
-    """Build a mesh large enough for every path of the parallel build: its root is binned on
-    all cores (more than PARALLEL_BINNING triangles) and its subtrees are built and collapsed as
-    tasks.  Small meshes never reach those kernels, and an upload of a large one would compile
+    """Build a mesh large enough for every path of the parallel build: its top levels are
+    split on all cores (more than MIN_TASK triangles) and its subtrees are built and collapsed
+    as tasks.  Small meshes never reach those kernels, and an upload of a large one would compile
     them in the service."""
-    size = math.isqrt(PARALLEL_BINNING // 2) + 1  # 2 * size**2 triangles
+    size = math.isqrt(MIN_TASK // 2) + 1  # 2 * size**2 triangles
     scene = Scene(dtype=dtype)
     scene.add_mesh(*_grid_mesh(size))
     scene.intersect(*_rays(13, dtype))

@@ -7,9 +7,15 @@ from dataclasses import replace
 import numpy as np
 from numba import njit, prange
 
-from raycore.bvh.build import PRIM_INDEX, PRIM_WIDTH, round_down32, round_up32
 from raycore.bvh.layout import build_bvh_from_records
 from raycore.bvh.leaves import pack_leaves
+from raycore.bvh.records import (
+    PRIM_INDEX,
+    PRIM_WIDTH,
+    check_primitive_count,
+    round_down32,
+    round_up32,
+)
 from raycore.rays import as_float_array
 
 #: Faces per parallel work item of the passes over faces below.
@@ -119,9 +125,11 @@ class Mesh:
         if self._built_for == (dtype, params):
             return
         start = time.perf_counter()
-        # bound the triangles as the kernels will see them, after rounding to dtype
+        check_primitive_count(len(self.faces))
+        # bound the triangles as the kernels will see them, after rounding to dtype; rounding
+        # is monotonic, so the rounded bounds are the bounds of the rounded vertices
         vertices = self.vertices.astype(dtype, copy=False)
-        lo, hi = referenced_bounds(vertices, self.faces)
+        lo, hi = (bound.astype(dtype).astype(np.float64) for bound in self.bounds)
         # let a rebuild's old tree go before the new one takes memory
         self.bvh = self.leaf_blocks = self.slot_face = self._built_for = None
         bvh = build_bvh_from_records(triangle_records(vertices, self.faces), lo, hi, params)

@@ -4,18 +4,14 @@ The builder works on axis-aligned bounds of abstract primitives, so one piece se
 the triangles of a mesh and the objects (instances, analytic shapes) of a scene.  It follows
 pbrt-v4's ``BVHAggregate::buildRecursive`` (SAH buckets) and Embree's parallel binned builder,
 and splits any node whose SAH cost beats making it a leaf (tinybvh's ``c_trav`` and ``c_int`` are
-the two cost parameters).
+the two cost parameters).  It works on 32-byte float32 records (:mod:`raycore.bvh.records`),
+splitting one node at a time as :mod:`raycore.bvh.split` does.
 
-Memory is what limits the meshes a machine can build, so the build keeps one 32-byte float32
-record per primitive (its box and index, Embree's PrimRef) and partitions those records in place;
-the binary nodes are 32-byte float32 records too.  Boxes are rounded outwards to float32, so they
-stay conservative for a float64 scene.
-
-Work runs in two phases.  The top of the tree is split node by node, binning each large node on
-all cores.  Once every node left is small (at most ``F / TASKS`` primitives), those subtrees are
-built independently, one per core at a time, each numbering its nodes inside a range reserved
-for it (a subtree over n primitives has at most 2n - 1 nodes).  Nothing depends on which thread
-builds what, so the tree is the same for any number of threads.
+Work runs in two phases.  The top of the tree is split one depth at a time, every step over all
+of a depth's nodes on all cores.  Once every node left is small (at most ``F / TASKS``
+primitives), those subtrees are built independently, one per core at a time, each numbering its
+nodes inside a range reserved for it (a subtree over n primitives has at most 2n - 1 nodes).
+Nothing depends on which thread builds what, so the tree is the same for any number of threads.
 """
 
 from dataclasses import dataclass
@@ -23,40 +19,38 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, parallel_chunksize, prange
 
-from raycore.bvh.build_simd import bin_record
+from raycore.bvh.records import BINARY_COUNT, BINARY_REF, BINARY_WIDTH, PRIM_WIDTH
+from raycore.bvh.split import (
+    CENTROIDS,
+    SIDE_WIDTH,
+    best_pair_split,
+    best_split,
+    bin_range,
+    bins_for,
+    bound_range,
+    clear_bins,
+    divide,
+    empty_side,
+    made_leaf,
+    new_bins,
+    partition,
+    set_scale,
+    store_side,
+)
 
 #: Deepest tree the build may produce; traversal stacks are sized from it.
 MAX_DEPTH = 64
 
-#: Primitive record (float32, 32 bytes): box lo xyz, box hi xyz, then the primitive's index as
-#: int32 bits and one unused slot.
-PRIM_WIDTH = 8
-PRIM_INDEX = 6
-#: Binary node record (float32, 32 bytes): box lo xyz, hi xyz, then as int32 bits the first child
-#: (the second is the next record) or the first primitive of a leaf, and the leaf's size (0 for
-#: an internal node).
-BINARY_WIDTH = 8
-BINARY_REF, BINARY_COUNT = 6, 7
-
-#: Records are clamped to finite float32 (a box beyond it is widened to infinity in the final
-#: layout), so that centroids and extents never meet inf - inf.
-FLOAT32_MAX = np.float32(np.finfo(np.float32).max)
-
 #: The top phase splits nodes until none holds more than 1 / TASKS of the primitives: enough
 #: subtrees to keep every core busy to the end, few enough that each is worth a task.
 TASKS = 64
-#: Subtrees smaller than this are never split in the top phase (its per-node cost is higher).
-MIN_TASK = 4096
-
-
-@njit(cache=True, inline="always")
-def _bins_for(size, bins):
-    """Buckets for a node of ``size`` primitives: ``bins``, or fewer for a small node, whose
-    buckets would cost more to fill and sweep than its primitives (Embree uses 4 + size / 20).
-    On the shared meshes this kept the SAH cost within 0.1% and took a fifth off the build."""
-    return min(bins, 2 + size // 4)
-#: Nodes larger than this are binned by all cores together, in chunks of this many primitives.
-PARALLEL_BINNING = 65536
+#: Nodes of up to this many primitives are left to the subtree phase: each depth of the top
+#: phase costs three parallel steps, and a step can wait for a thread switch when another
+#: process holds a core.
+MIN_TASK = 16384
+#: Records per work item of the top phase: each depth's nodes are binned and partitioned in
+#: chunks of this many records, enough to amortise a work item's set-up.
+CHUNK = 65536
 
 
 @dataclass(frozen=True)
@@ -92,392 +86,7 @@ class BuildParams:
                 raise ValueError(f"{name} must be positive and finite, got {value!r}")
 
 
-# ---------------------------------------------------------------------------- primitive records
-
-
-@njit(cache=True, inline="always")
-def round_down32(x):
-    """Largest float32 <= ``x`` (float32 or float64), clamped to [-FLOAT32_MAX, FLOAT32_MAX]."""
-    y = np.float32(x)
-    if y > x:
-        y = np.nextafter(y, np.float32(-np.inf))
-    return min(max(y, -FLOAT32_MAX), FLOAT32_MAX)
-
-
-@njit(cache=True, inline="always")
-def round_up32(x):
-    """Smallest float32 >= ``x`` (float32 or float64), clamped to [-FLOAT32_MAX, FLOAT32_MAX]."""
-    y = np.float32(x)
-    if y < x:
-        y = np.nextafter(y, np.float32(np.inf))
-    return min(max(y, -FLOAT32_MAX), FLOAT32_MAX)
-
-
-@njit(cache=True, parallel=True)
-def records_from_bounds(lo, hi):
-    """Primitive records of boxes ``lo``, ``hi`` (float32 or float64, shape (F, 3)), rounded
-    outwards to float32: an ndarray of float32, shape (F, PRIM_WIDTH)."""
-    n = lo.shape[0]
-    prims = np.empty((n, PRIM_WIDTH), np.float32)
-    index = prims.view(np.int32)
-    for p in prange(n):
-        for a in range(3):
-            prims[p, a] = round_down32(lo[p, a])
-            prims[p, 3 + a] = round_up32(hi[p, a])
-        index[p, PRIM_INDEX] = p
-        index[p, PRIM_INDEX + 1] = 0
-    return prims
-
-
-# ---------------------------------------------------------------------------- binning
-#
-# Hot loops index arrays directly rather than through views (``a[i]``, ``a[i:j]``): a view of an
-# array that several threads share changes its reference count atomically, and threads that
-# build their subtrees side by side would fight over that count's cache line.
-
-
-@njit(cache=True, inline="always")
-def _bin_of(lo, hi, cmin, scale, last):
-    """Bucket of a centroid on one axis.  The centroid is halved before adding, so that no sum
-    of finite float32 overflows; the same expression bins and partitions."""
-    return int(min((np.float32(0.5) * lo + np.float32(0.5) * hi - cmin) * scale, last))
-
-
-@njit(cache=True, inline="always")
-def _clear_bins(counts, boxes, bins):
-    for a in range(3):
-        for b in range(bins):
-            counts[a, b] = 0
-            for k in range(3):
-                boxes[a, b, k] = np.inf
-                boxes[a, b, 3 + k] = -np.inf
-
-
-@njit(cache=True)
-def _new_bins(bins):
-    """Bucket counts (3, bins) int64 and boxes (3, bins, 8) float32, whose lanes 0-5 are a box
-    (lo xyz, hi xyz) and 6-7 padding, so that a box is one vector."""
-    return np.empty((3, bins), np.int64), np.empty((3, bins, 8), np.float32)
-
-
-@njit(cache=True)
-def _bin_range(prims, start, end, cbox, scale, bins, counts, boxes):
-    """Add primitives ``start:end`` to the buckets of all three axes.
-
-    ``cbox`` (6,) is the centroid box, ``scale`` (4,) buckets per unit of centroid (float32)
-    on each axis and 0.  ``counts`` and ``boxes`` (:func:`_new_bins`) accumulate; an axis with
-    scale 0 puts everything in bucket 0.  Each record is binned as :func:`_bin_of` does, in one
-    vector step (:func:`raycore.bvh.build_simd.bin_record`).
-    """
-    last = np.float32(bins - 1)
-    for i in range(start, end):
-        bin_record(prims, i, cbox, scale, last, counts, boxes)
-
-
-@njit(cache=True, parallel=True)
-def _bin_parallel(prims, start, end, cbox, scale, bins, counts, boxes):
-    """:func:`_bin_range` over chunks on all cores, then merged (sums, minima and maxima do not
-    depend on the order they are taken in).  Each chunk fills buckets of its own, allocated in
-    its thread: buckets of neighbouring chunks in one array share cache lines, and binning
-    into them ran ten times slower on two cores than on one."""
-    chunks = (end - start + PARALLEL_BINNING - 1) // PARALLEL_BINNING
-    chunk_counts = np.empty((chunks, 3, bins), np.int64)
-    chunk_boxes = np.empty((chunks, 3, bins, 8), np.float32)
-    for c in prange(chunks):
-        own_counts, own_boxes = _new_bins(bins)
-        _clear_bins(own_counts, own_boxes, bins)
-        _bin_range(prims, start + c * PARALLEL_BINNING,
-                   min(end, start + (c + 1) * PARALLEL_BINNING), cbox, scale, bins, own_counts,
-                   own_boxes)
-        chunk_counts[c] = own_counts
-        chunk_boxes[c] = own_boxes
-    _clear_bins(counts, boxes, bins)
-    for c in range(chunks):
-        for a in range(3):
-            for b in range(bins):
-                counts[a, b] += chunk_counts[c, a, b]
-                for k in range(3):
-                    boxes[a, b, k] = min(boxes[a, b, k], chunk_boxes[c, a, b, k])
-                    boxes[a, b, 3 + k] = max(boxes[a, b, 3 + k], chunk_boxes[c, a, b, 3 + k])
-
-
-@njit(cache=True, inline="always")
-def _half_area(lox, loy, loz, hix, hiy, hiz):
-    dx = np.float64(hix) - np.float64(lox)
-    dy = np.float64(hiy) - np.float64(loy)
-    dz = np.float64(hiz) - np.float64(loz)
-    return dx * dy + dy * dz + dz * dx
-
-
-@njit(cache=True)
-def _best_split(counts, boxes, scale, bins, suffix):
-    """Cheapest bucket boundary: (axis, bucket, cost) with cost = sum of the children's
-    half-areas times their primitive counts, or axis -1 when no axis has two non-empty sides.
-
-    Boundaries next to empty buckets repeat a partition already priced, so only the boundary
-    after each non-empty bucket is priced (the first of equally cheap ones wins, as in a sweep
-    over all of them).  ``suffix`` (2, bins) float64 is scratch.
-    """
-    best_axis = -1
-    best_bucket = -1
-    best_cost = np.inf
-    for a in range(3):
-        if scale[a] == 0:
-            continue
-        lx, ly, lz = np.inf, np.inf, np.inf
-        hx, hy, hz = -np.inf, -np.inf, -np.inf
-        total = 0
-        area = 0.0
-        for b in range(bins - 1, 0, -1):
-            if counts[a, b]:
-                lx, ly, lz = min(lx, boxes[a, b, 0]), min(ly, boxes[a, b, 1]), min(lz, boxes[
-                    a, b, 2])
-                hx, hy, hz = max(hx, boxes[a, b, 3]), max(hy, boxes[a, b, 4]), max(hz, boxes[
-                    a, b, 5])
-                total += counts[a, b]
-                area = _half_area(lx, ly, lz, hx, hy, hz)
-            suffix[0, b] = area
-            suffix[1, b] = total
-        lx, ly, lz = np.inf, np.inf, np.inf
-        hx, hy, hz = -np.inf, -np.inf, -np.inf
-        total = 0
-        for b in range(1, bins):
-            if counts[a, b - 1] == 0:
-                continue
-            lx, ly, lz = min(lx, boxes[a, b - 1, 0]), min(ly, boxes[a, b - 1, 1]), min(lz, boxes[
-                a, b - 1, 2])
-            hx, hy, hz = max(hx, boxes[a, b - 1, 3]), max(hy, boxes[a, b - 1, 4]), max(hz, boxes[
-                a, b - 1, 5])
-            total += counts[a, b - 1]
-            if suffix[1, b] == 0:
-                break
-            cost = _half_area(lx, ly, lz, hx, hy, hz) * total + suffix[0, b] * suffix[1, b]
-            if cost < best_cost:
-                best_cost = cost
-                best_axis = a
-                best_bucket = b
-    return best_axis, best_bucket, best_cost
-
-
-@njit(cache=True)
-def _set_scale(cbox, bins, scale):
-    """Buckets per unit of centroid on each axis into ``scale`` (3,) float32: 0 where the
-    centroids do not spread, since that axis has nothing to split."""
-    for a in range(3):
-        extent = cbox[3 + a] - cbox[a]
-        s = np.float32(0)
-        if extent > 0:
-            s = np.float32(bins) / extent
-            if not np.isfinite(s):
-                s = np.float32(0)
-        scale[a] = s
-
-
-@njit(cache=True)
-def _best_pair_split(prims, start, cbox, scale, bins):
-    """:func:`_best_split` for a node of two primitives (a third of all nodes), without buckets:
-    every axis that puts them in different buckets prices the same partition, so the first one
-    wins, as in the sweep."""
-    last = np.float32(bins - 1)
-    p, q = start, start + 1
-    for a in range(3):
-        if scale[a] == 0:
-            continue
-        key_p = _bin_of(prims[p, a], prims[p, 3 + a], cbox[a], scale[a], last)
-        key_q = _bin_of(prims[q, a], prims[q, 3 + a], cbox[a], scale[a], last)
-        if key_p != key_q:
-            cost = _half_area(prims[p, 0], prims[p, 1], prims[p, 2], prims[p, 3], prims[p, 4],
-                              prims[p, 5]) + _half_area(prims[q, 0], prims[q, 1], prims[q, 2],
-                                                        prims[q, 3], prims[q, 4], prims[q, 5])
-            return a, min(key_p, key_q) + 1, cost
-    return -1, -1, np.inf
-
-
-# ---------------------------------------------------------------------------- partition
-
-
-#: A side of a split, (12,) float32: its box (lo xyz, hi xyz), then its centroid box.
-SIDE_WIDTH = 12
-CENTROIDS = 6
-
-
-@njit(cache=True, inline="always")
-def _nothing():
-    """A side holding nothing, as a tuple of 12 float32.  Sides grow as tuples of locals, which
-    stay in registers: grown in memory, the partition ran at twice the time."""
-    inf = np.float32(np.inf)
-    return (inf, inf, inf, -inf, -inf, -inf, inf, inf, inf, -inf, -inf, -inf)
-
-
-@njit(cache=True, inline="always")
-def _grown(side, prims, i):
-    """``side`` (a tuple from :func:`_nothing`) with primitive ``i`` added: its box, and its
-    centroid 0.5 * lo + 0.5 * hi (as :func:`_bin_of` computes it) to the centroid box."""
-    lx, ly, lz, hx, hy, hz, clx, cly, clz, chx, chy, chz = side
-    half = np.float32(0.5)
-    ax, ay, az = prims[i, 0], prims[i, 1], prims[i, 2]
-    bx, by, bz = prims[i, 3], prims[i, 4], prims[i, 5]
-    cx, cy, cz = half * ax + half * bx, half * ay + half * by, half * az + half * bz
-    return (min(lx, ax), min(ly, ay), min(lz, az), max(hx, bx), max(hy, by), max(hz, bz),
-            min(clx, cx), min(cly, cy), min(clz, cz), max(chx, cx), max(chy, cy), max(chz, cz))
-
-
-@njit(cache=True, inline="always")
-def _store(sides, row, side):
-    for k in range(SIDE_WIDTH):
-        sides[row, k] = side[k]
-
-
-@njit(cache=True)
-def _partition(prims, start, end, axis, bucket, cmin, scale, last, sides):
-    """Move primitives whose bucket on ``axis`` is below ``bucket`` before the others, in place;
-    ``sides`` (2, SIDE_WIDTH) gets each side's box and centroid box.  Returns the boundary.
-
-    A branchless Lomuto partition: every record is swapped with the first right one, and the
-    boundary moves on when the record belongs left.  Deep in the tree a node's records are in
-    no useful order, so a branch on their side mispredicts half the time: Hoare's partition
-    took 13-15 ns per record there, this one 6-9.
-    """
-    j = start
-    for i in range(start, end):
-        goes_left = _bin_of(prims[i, axis], prims[i, 3 + axis], cmin, scale, last) < bucket
-        r0, r1, r2, r3 = prims[i, 0], prims[i, 1], prims[i, 2], prims[i, 3]
-        r4, r5, r6, r7 = prims[i, 4], prims[i, 5], prims[i, 6], prims[i, 7]
-        for k in range(PRIM_WIDTH):
-            prims[i, k] = prims[j, k]
-        prims[j, 0], prims[j, 1], prims[j, 2], prims[j, 3] = r0, r1, r2, r3
-        prims[j, 4], prims[j, 5], prims[j, 6], prims[j, 7] = r4, r5, r6, r7
-        j += goes_left
-    _bound_range(prims, start, j, sides, 0)
-    _bound_range(prims, j, end, sides, 1)
-    return j
-
-
-@njit(cache=True, parallel=True)
-def _partition_parallel(prims, start, end, axis, bucket, cmin, scale, last, sides):
-    """:func:`_partition` on all cores: each chunk of PARALLEL_BINNING records is partitioned
-    on its own, then the right records left of the boundary trade places with the left records
-    right of it, in pieces on all cores.  The chunks do not depend on the number of threads, so
-    neither does the order the records end in."""
-    n = end - start
-    chunks = (n + PARALLEL_BINNING - 1) // PARALLEL_BINNING
-    lefts = np.empty(chunks, np.int64)
-    chunk_sides = np.empty((chunks, 2, SIDE_WIDTH), np.float32)
-    for c in prange(chunks):
-        first = start + c * PARALLEL_BINNING
-        own = np.empty((2, SIDE_WIDTH), np.float32)  # see _bin_parallel
-        lefts[c] = _partition(prims, first, min(end, first + PARALLEL_BINNING), axis, bucket,
-                              cmin, scale, last, own) - first
-        chunk_sides[c] = own
-    for side in range(2):
-        _store(sides, side, _nothing())
-        for c in range(chunks):
-            for k in (0, 1, 2, CENTROIDS, CENTROIDS + 1, CENTROIDS + 2):
-                sides[side, k] = min(sides[side, k], chunk_sides[c, side, k])
-                sides[side, 3 + k] = max(sides[side, 3 + k], chunk_sides[c, side, 3 + k])
-    mid = start + lefts.sum()
-    # runs of misplaced records, in order: right records before mid, left records from mid on
-    wrong_right = np.empty((chunks, 2), np.int64)  # (first record, count)
-    wrong_left = np.empty((chunks, 2), np.int64)
-    for c in range(chunks):
-        first = start + c * PARALLEL_BINNING
-        split = first + lefts[c]
-        stop = min(end, first + PARALLEL_BINNING)
-        wrong_right[c, 0] = split
-        wrong_right[c, 1] = max(0, min(stop, mid) - split)
-        wrong_left[c, 0] = max(first, mid)
-        wrong_left[c, 1] = max(0, split - max(first, mid))
-    right_before = np.cumsum(wrong_right[:, 1]) - wrong_right[:, 1]
-    left_before = np.cumsum(wrong_left[:, 1]) - wrong_left[:, 1]
-    moves = wrong_right[:, 1].sum()
-    pieces = (moves + PARALLEL_BINNING - 1) // PARALLEL_BINNING
-    for piece in prange(pieces):
-        k = piece * PARALLEL_BINNING
-        stop = min(moves, k + PARALLEL_BINNING)
-        a = np.searchsorted(right_before, k, side="right") - 1
-        b = np.searchsorted(left_before, k, side="right") - 1
-        i = wrong_right[a, 0] + k - right_before[a]
-        j = wrong_left[b, 0] + k - left_before[b]
-        while k < stop:
-            while i >= wrong_right[a, 0] + wrong_right[a, 1]:
-                a += 1
-                i = wrong_right[a, 0]
-            while j >= wrong_left[b, 0] + wrong_left[b, 1]:
-                b += 1
-                j = wrong_left[b, 0]
-            for f in range(PRIM_WIDTH):
-                prims[i, f], prims[j, f] = prims[j, f], prims[i, f]
-            i += 1
-            j += 1
-            k += 1
-    return mid
-
-
-@njit(cache=True)
-def _bound_range(prims, start, end, sides, side):
-    """Box and centroid box of primitives ``start:end`` into ``sides[side]``."""
-    acc = _nothing()
-    for i in range(start, end):
-        acc = _grown(acc, prims, i)
-    _store(sides, side, acc)
-
-
-@njit(cache=True, parallel=True)
-def _bound_all(prims):
-    """A side (SIDE_WIDTH,) float32 holding all primitives, in chunks on all cores."""
-    n = prims.shape[0]
-    chunks = max(1, (n + PARALLEL_BINNING - 1) // PARALLEL_BINNING)
-    parts = np.empty((chunks, SIDE_WIDTH), np.float32)
-    for c in prange(chunks):
-        own = np.empty((1, SIDE_WIDTH), np.float32)  # not a row of parts: see _bin_parallel
-        _bound_range(prims, c * PARALLEL_BINNING, min(n, (c + 1) * PARALLEL_BINNING), own, 0)
-        parts[c] = own[0]
-    acc = np.empty((1, SIDE_WIDTH), np.float32)
-    _store(acc, 0, _nothing())
-    for c in range(chunks):
-        for k in (0, 1, 2, CENTROIDS, CENTROIDS + 1, CENTROIDS + 2):
-            acc[0, k] = min(acc[0, k], parts[c, k])
-            acc[0, 3 + k] = max(acc[0, 3 + k], parts[c, 3 + k])
-    return acc[0]
-
-
-# ---------------------------------------------------------------------------- nodes
-
-
-@njit(cache=True)
-def _made_leaf(nodes, refs, node, start, end, costs, best):
-    """Make ``node`` (primitives ``start:end``) a leaf and return True when that costs no more
-    than its cheapest split ``best`` (axis, bucket, cost), or when it cannot be split and fits;
-    ``costs`` is (max_leaf_size, traversal_cost, intersection_cost)."""
-    size = end - start
-    best_axis, _, best_cost = best
-    area = _half_area(nodes[node, 0], nodes[node, 1], nodes[node, 2], nodes[node, 3],
-                      nodes[node, 4], nodes[node, 5])
-    leaf_cost = costs[2] * size
-    split_cost = costs[1] + costs[2] * best_cost / area if area > 0 else np.inf
-    make_leaf = size == 1 or (size <= costs[0] and leaf_cost <= split_cost)
-    if make_leaf or (best_axis < 0 and size <= costs[0]):
-        refs[node, BINARY_REF] = start
-        refs[node, BINARY_COUNT] = size
-        return True
-    return False
-
-
-@njit(cache=True)
-def _divide(prims, start, end, bins, best, sides, cbox, scale):
-    """Partition primitives ``start:end`` at split ``best`` found with centroid box ``cbox``
-    and ``scale``, or halve them when no split separates anything; returns the boundary, and
-    leaves the children's boxes and centroid boxes in ``sides`` (2, SIDE_WIDTH)."""
-    best_axis, best_bucket, _ = best
-    if best_axis >= 0:
-        last = np.float32(bins - 1)
-        return _partition(prims, start, end, best_axis, best_bucket, cbox[best_axis],
-                          scale[best_axis], last, sides)
-    # all centroids coincide but the node is too big for a leaf: split by count
-    mid = (start + end) // 2
-    _bound_range(prims, start, mid, sides, 0)
-    _bound_range(prims, mid, end, sides, 1)
-    return mid
+# ---------------------------------------------------------------------------- subtrees
 
 
 @njit(cache=True, inline="always")
@@ -503,7 +112,7 @@ def _build_subtree(prims, nodes, refs, root, start, end, root_cbox, depth, first
     """Build the subtree of ``root`` (its box already in ``nodes``) over primitives
     ``start:end``, numbering new nodes from ``first_free``.  Returns the deepest leaf's depth, or
     -1 when the tree would pass MAX_DEPTH."""
-    counts, boxes = _new_bins(bins)
+    counts, boxes = new_bins(bins)
     suffix = np.empty((2, bins))
     sides = np.empty((2, SIDE_WIDTH), np.float32)
     cbox = np.empty(6, np.float32)
@@ -522,18 +131,18 @@ def _build_subtree(prims, nodes, refs, root, start, end, root_cbox, depth, first
         for k in range(6):
             cbox[k] = stack_cbox[top, k]
         deepest = max(deepest, level)
-        used = _bins_for(hi - lo, bins)
-        _set_scale(cbox, used, scale)
+        used = bins_for(hi - lo, bins)
+        set_scale(cbox, used, scale)
         best = (-1, -1, np.inf)
         if hi - lo == 2:
-            best = _best_pair_split(prims, lo, cbox, scale, used)
+            best = best_pair_split(prims, lo, cbox, scale, used)
         elif hi - lo > 2:
-            _clear_bins(counts, boxes, used)
-            _bin_range(prims, lo, hi, cbox, scale, used, counts, boxes)
-            best = _best_split(counts, boxes, scale, used, suffix)
-        if _made_leaf(nodes, refs, node, lo, hi, costs, best):
+            clear_bins(counts, boxes, used)
+            bin_range(prims, lo, hi, cbox, scale, used, counts, boxes)
+            best = best_split(counts, boxes, scale, used, suffix)
+        if made_leaf(nodes, refs, node, lo, hi, costs, best):
             continue
-        mid = _divide(prims, lo, hi, used, best, sides, cbox, scale)
+        mid = divide(prims, lo, hi, used, best, sides, cbox, scale)
         if level + 1 >= MAX_DEPTH:
             return -1
         _add_children(nodes, refs, node, free, sides)
@@ -556,10 +165,162 @@ def _build_tasks(prims, nodes, refs, tasks, task_cbox, task_base, schedule, bins
                                     task_cbox[t], tasks[t, 3], task_base[t], bins, costs)
 
 
+# ---------------------------------------------------------------------------- top phase
+
+
+@njit(cache=True, parallel=True)
+def _bound_all(prims):
+    """A side (SIDE_WIDTH,) float32 holding all primitives, in chunks on all cores."""
+    n = prims.shape[0]
+    chunks = max(1, (n + CHUNK - 1) // CHUNK)
+    parts = np.empty((chunks, SIDE_WIDTH), np.float32)
+    for c in prange(chunks):
+        own = np.empty((1, SIDE_WIDTH), np.float32)  # see _bin_items
+        bound_range(prims, c * CHUNK, min(n, (c + 1) * CHUNK), own, 0)
+        parts[c] = own[0]
+    acc = np.empty((1, SIDE_WIDTH), np.float32)
+    store_side(acc, 0, empty_side())
+    for c in range(chunks):
+        for k in (0, 1, 2, CENTROIDS, CENTROIDS + 1, CENTROIDS + 2):
+            acc[0, k] = min(acc[0, k], parts[c, k])
+            acc[0, 3 + k] = max(acc[0, 3 + k], parts[c, 3 + k])
+    return acc[0]
+
+
+@njit(cache=True, parallel=True)
+def _bin_items(prims, items, cboxes, scales, bins):
+    """Bin every work item (``items`` rows: first record, end, node) with its node's centroid
+    box and scale, on all cores: (counts (I, 3, bins) int64, boxes (I, 3, bins, 8) float32).
+
+    Each item fills buckets of its own, allocated in its thread, and copies them out once:
+    buckets of neighbouring items in one array share cache lines, and binning into them ran ten
+    times slower on two cores than on one.
+    """
+    counts = np.empty((len(items), 3, bins), np.int64)
+    boxes = np.empty((len(items), 3, bins, 8), np.float32)
+    for i in prange(len(items)):
+        node = items[i, 2]
+        own_counts, own_boxes = new_bins(bins)
+        clear_bins(own_counts, own_boxes, bins)
+        bin_range(prims, items[i, 0], items[i, 1], cboxes[node], scales[node], bins,
+                   own_counts, own_boxes)
+        counts[i] = own_counts
+        boxes[i] = own_boxes
+    return counts, boxes
+
+
 @njit(cache=True)
-def _split_top(prims, nodes, refs, bins, costs, task_size):
-    """Top phase: split nodes breadth first until none holds more than ``task_size``
-    primitives, binning the large ones on all cores.
+def _choose_splits(item_first, item_counts, item_boxes, scales, bins):
+    """Merge each node's items' buckets and choose its split: (K, 3) float64 rows of axis,
+    bucket and cost (axis -1: halve by count), as :func:`best_split` does.  Nodes of the top
+    phase hold more than MIN_TASK records, more than any leaf, so they are always split."""
+    counts, boxes = new_bins(bins)
+    suffix = np.empty((2, bins))
+    best = np.empty((len(item_first) - 1, 3))
+    for k in range(len(item_first) - 1):
+        clear_bins(counts, boxes, bins)
+        for i in range(item_first[k], item_first[k + 1]):
+            for a in range(3):
+                for b in range(bins):
+                    counts[a, b] += item_counts[i, a, b]
+                    for f in range(3):
+                        boxes[a, b, f] = min(boxes[a, b, f], item_boxes[i, a, b, f])
+                        boxes[a, b, 3 + f] = max(boxes[a, b, 3 + f], item_boxes[i, a, b, 3 + f])
+        best[k, 0], best[k, 1], best[k, 2] = best_split(counts, boxes, scales[k], bins,
+                                                          suffix)
+    return best
+
+
+@njit(cache=True, parallel=True)
+def _partition_items(prims, items, frontier, best, cboxes, scales, bins):
+    """Partition every work item on its own, on all cores, by its node's split; for a node
+    halved by count, only bound the item's records on each side of the middle.  Returns the
+    left records of each item (I,) and each item's sides (I, 2, SIDE_WIDTH)."""
+    lefts = np.empty(len(items), np.int64)
+    item_sides = np.empty((len(items), 2, SIDE_WIDTH), np.float32)
+    last = np.float32(bins - 1)
+    for i in prange(len(items)):
+        first, stop, k = items[i, 0], items[i, 1], items[i, 2]
+        own = np.empty((2, SIDE_WIDTH), np.float32)  # see _bin_items
+        axis = int(best[k, 0])
+        if axis >= 0:
+            lefts[i] = partition(prims, first, stop, axis, int(best[k, 1]), cboxes[k, axis],
+                                  scales[k, axis], last, own) - first
+        else:
+            mid = (frontier[k, 1] + frontier[k, 2]) // 2
+            lefts[i] = min(max(mid - first, 0), stop - first)
+            bound_range(prims, first, first + lefts[i], own, 0)
+            bound_range(prims, first + lefts[i], stop, own, 1)
+        item_sides[i] = own
+    return lefts, item_sides
+
+
+@njit(cache=True)
+def _misplaced_runs(items, item_first, lefts, frontier, best):
+    """Where each node's items put records on the wrong side of the node's boundary: per item
+    (first record, count) of right records before it and of left records from it on, how many
+    such records the node's earlier items hold, each node's boundary, and the swaps to make in
+    pieces of CHUNK (P, 3): node, first swap, end."""
+    runs = np.empty((len(items), 6), np.int64)  # right first, count, before; left alike
+    mids = np.empty(len(frontier), np.int64)
+    piece_count = 0
+    for k in range(len(frontier)):
+        mids[k] = frontier[k, 1] + lefts[item_first[k]:item_first[k + 1]].sum()
+        right_before = left_before = 0
+        for i in range(item_first[k], item_first[k + 1]):
+            split = items[i, 0] + lefts[i]
+            runs[i, 0] = split
+            runs[i, 1] = max(0, min(items[i, 1], mids[k]) - split) if best[k, 0] >= 0 else 0
+            runs[i, 2] = right_before
+            runs[i, 3] = max(items[i, 0], mids[k])
+            runs[i, 4] = max(0, split - max(items[i, 0], mids[k])) if best[k, 0] >= 0 else 0
+            runs[i, 5] = left_before
+            right_before += runs[i, 1]
+            left_before += runs[i, 4]
+        piece_count += (right_before + CHUNK - 1) // CHUNK
+    pieces = np.empty((piece_count, 3), np.int64)
+    p = 0
+    for k in range(len(frontier)):
+        moves = 0
+        for i in range(item_first[k], item_first[k + 1]):
+            moves += runs[i, 1]
+        for first in range(0, moves, CHUNK):
+            pieces[p, 0], pieces[p, 1], pieces[p, 2] = k, first, min(moves, first + CHUNK)
+            p += 1
+    return runs, mids, pieces
+
+
+@njit(cache=True, parallel=True)
+def _swap_pieces(prims, runs, item_first, pieces):
+    """Trade the misplaced records of each node (see :func:`_misplaced_runs`), the k-th right
+    record before its boundary with the k-th left record after it, in pieces on all cores."""
+    for p in prange(len(pieces)):
+        k, swap, stop = pieces[p, 0], pieces[p, 1], pieces[p, 2]
+        own = runs[item_first[k]:item_first[k + 1]]
+        a = np.searchsorted(own[:, 2], swap, side="right") - 1
+        b = np.searchsorted(own[:, 5], swap, side="right") - 1
+        i = own[a, 0] + swap - own[a, 2]
+        j = own[b, 3] + swap - own[b, 5]
+        while swap < stop:
+            while i >= own[a, 0] + own[a, 1]:
+                a += 1
+                i = own[a, 0]
+            while j >= own[b, 3] + own[b, 4]:
+                b += 1
+                j = own[b, 3]
+            for f in range(PRIM_WIDTH):
+                prims[i, f], prims[j, f] = prims[j, f], prims[i, f]
+            i += 1
+            j += 1
+            swap += 1
+
+
+def _split_top(prims, nodes, refs, bins, task_size):
+    """Top phase: split nodes one depth at a time until none holds more than ``task_size``
+    primitives.  Each depth's nodes are cut into work items of CHUNK records, and each step
+    (binning, partitioning, then trading misplaced records) runs over every item of the depth
+    on all cores: three parallel steps per depth, not per node, since a parallel step costs a
+    thread switch when another process holds a core.
 
     Returns
     -------
@@ -570,53 +331,58 @@ def _split_top(prims, nodes, refs, bins, costs, task_size):
     made : int
         Nodes numbered so far (0 .. made - 1), or -1 when the tree would pass MAX_DEPTH.
     """
-    n = prims.shape[0]
-    counts, boxes = _new_bins(bins)
-    suffix = np.empty((2, bins))
-    sides = np.empty((2, SIDE_WIDTH), np.float32)
-    cbox = np.empty(6, np.float32)
-    scale = np.zeros(4, np.float32)
-    sides[0] = _bound_all(prims)
-    nodes[0, 0:6] = sides[0, 0:6]
-    # nodes above task_size at one depth are disjoint, so few are ever queued
-    capacity = 2 * (n // task_size + 1) * MAX_DEPTH + 2
-    queue = np.empty((capacity, 4), np.int64)  # node, start, end, depth
-    queue_cbox = np.empty((capacity, 6), np.float32)
-    _push(queue, queue_cbox, 0, 0, 0, n, 0, sides, 0)
-    head, tail = 0, 1
-    is_task = np.zeros(capacity, np.bool_)
+    root = _bound_all(prims)
+    nodes[0, 0:6] = root[0:6]
+    frontier = np.array([[0, 0, len(prims), 0]], np.int64)  # node, start, end, depth
+    cboxes = root[None, CENTROIDS:CENTROIDS + 6].copy()
+    tasks, task_cbox = [], []
     made = 1
-    while head < tail:
-        node, start, end, level = queue[head, 0], queue[head, 1], queue[head, 2], queue[head, 3]
-        cbox[:] = queue_cbox[head]
-        head += 1
-        if end - start <= task_size:
-            is_task[head - 1] = True
-            continue
-        _set_scale(cbox, bins, scale)
-        if end - start > PARALLEL_BINNING:
-            _bin_parallel(prims, start, end, cbox, scale, bins, counts, boxes)
-        else:
-            _clear_bins(counts, boxes, bins)
-            _bin_range(prims, start, end, cbox, scale, bins, counts, boxes)
-        best = _best_split(counts, boxes, scale, bins, suffix)
-        if _made_leaf(nodes, refs, node, start, end, costs, best):
-            continue
-        if best[0] >= 0 and end - start > PARALLEL_BINNING:
-            mid = _partition_parallel(prims, start, end, best[0], best[1], cbox[best[0]],
-                                      scale[best[0]], np.float32(bins - 1), sides)
-        else:
-            mid = _divide(prims, start, end, bins, best, sides, cbox, scale)
-        if level + 1 >= MAX_DEPTH:
-            made = -1
+    while len(frontier):
+        small = frontier[:, 2] - frontier[:, 1] <= task_size
+        tasks.append(frontier[small])
+        task_cbox.append(cboxes[small])
+        frontier, cboxes = frontier[~small], cboxes[~small]
+        if not len(frontier):
             break
-        _add_children(nodes, refs, node, made, sides)
-        _push(queue, queue_cbox, tail, made, start, mid, level + 1, sides, 0)
-        _push(queue, queue_cbox, tail + 1, made + 1, mid, end, level + 1, sides, 1)
-        tail += 2
-        made += 2
-    picked = np.flatnonzero(is_task)
-    return queue[picked], queue_cbox[picked], made
+        if frontier[0, 3] + 1 >= MAX_DEPTH:
+            return None, None, -1
+        scales = np.zeros((len(frontier), 4), np.float32)
+        for k in range(len(frontier)):
+            set_scale(cboxes[k], bins, scales[k])
+        chunks = -(-(frontier[:, 2] - frontier[:, 1]) // CHUNK)
+        item_first = np.concatenate([[0], np.cumsum(chunks)])
+        node_of = np.repeat(np.arange(len(frontier)), chunks)
+        first = frontier[node_of, 1] + CHUNK * (np.arange(len(node_of)) - item_first[node_of])
+        items = np.stack([first, np.minimum(first + CHUNK, frontier[node_of, 2]), node_of], 1)
+        best = _choose_splits(item_first, *_bin_items(prims, items, cboxes, scales, bins),
+                              scales, bins)
+        lefts, item_sides = _partition_items(prims, items, frontier, best, cboxes, scales, bins)
+        runs, mids, pieces = _misplaced_runs(items, item_first, lefts, frontier, best)
+        _swap_pieces(prims, runs, item_first, pieces)
+        # children: the union of each node's items' sides
+        sides = np.stack([
+            np.minimum.reduceat(item_sides, item_first[:-1], axis=0),
+            np.maximum.reduceat(item_sides, item_first[:-1], axis=0)])
+        left_right = np.where(_LOWER, sides[0], sides[1])  # (K, 2, SIDE_WIDTH)
+        children = made + 2 * np.arange(len(frontier))
+        refs[frontier[:, 0], BINARY_REF] = children
+        refs[frontier[:, 0], BINARY_COUNT] = 0
+        nodes[children, 0:6] = left_right[:, 0, 0:6]
+        nodes[children + 1, 0:6] = left_right[:, 1, 0:6]
+        made += 2 * len(frontier)
+        depth = frontier[:, 3] + 1
+        frontier = np.stack([
+            np.stack([children, frontier[:, 1], mids, depth], 1),
+            np.stack([children + 1, mids, frontier[:, 2], depth], 1)], 1).reshape(-1, 4)
+        cboxes = left_right[:, :, CENTROIDS:CENTROIDS + 6].reshape(-1, 6)
+    return np.concatenate(tasks), np.concatenate(task_cbox), made
+
+
+#: Lanes of a side that hold minima (box lo, centroid lo): the others hold maxima.
+_LOWER = np.array([True] * 3 + [False] * 3 + [True] * 3 + [False] * 3)
+
+
+# ---------------------------------------------------------------------------- whole tree
 
 
 @njit(cache=True)
@@ -660,7 +426,7 @@ def build_binary_bvh(prims, bins, max_leaf_size, traversal_cost, intersection_co
     Parameters
     ----------
     prims : ndarray of float32, shape (F, PRIM_WIDTH)
-        Primitive records (see :func:`records_from_bounds`); on return, in leaf order.
+        Primitive records (:mod:`raycore.bvh.records`); on return, in leaf order.
     bins, max_leaf_size : int
     traversal_cost, intersection_cost : float
 
@@ -678,17 +444,19 @@ def build_binary_bvh(prims, bins, max_leaf_size, traversal_cost, intersection_co
     refs = nodes.view(np.int32)
     costs = np.array([max_leaf_size, traversal_cost, intersection_cost], np.float64)
     task_size = max(-(-n // TASKS), MIN_TASK)
-    tasks, task_cbox, made = _split_top(prims, nodes, refs, bins, costs, task_size)
-    deepest = np.full(len(tasks), -1, np.int64)
-    sizes = tasks[:, 2] - tasks[:, 1]
-    schedule = np.argsort(-sizes, kind="stable")
-    if made >= 0:
+    tasks, task_cbox, made = _split_top(prims, nodes, refs, bins, task_size)
+    too_deep = made < 0
+    if not too_deep:
+        sizes = tasks[:, 2] - tasks[:, 1]
+        schedule = np.argsort(-sizes, kind="stable")
         # a subtree over m primitives adds at most 2m - 2 nodes below its root
         base = made + np.concatenate([[0], np.cumsum(2 * sizes - 2)[:-1]]).astype(np.int64)
+        deepest = np.empty(len(tasks), np.int64)
         with parallel_chunksize(1):
             _build_tasks(prims, nodes, refs, tasks, task_cbox, base, schedule, bins, costs,
                          deepest)
-    if made < 0 or np.any(deepest < 0):
+        too_deep = np.any(deepest < 0)
+    if too_deep:
         raise ValueError("BVH deeper than MAX_DEPTH: the primitive bounds are degenerate")
     return BinaryBVH(nodes=nodes, depth=int(deepest.max()), top_count=int(made),
                      largest_subtree=int(sizes.max()))

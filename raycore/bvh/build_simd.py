@@ -49,10 +49,14 @@ def _grow(builder, pointer, value):
 
 
 def _halves(builder, record):
-    """0.5 * lo + 0.5 * hi per axis in lanes 0-2 of the result, from a record's lanes."""
-    swapped = _lanes(builder, record, record, [3, 4, 5, 0, 1, 2, 6, 7])
+    """A record's centroid, 0.5 * lo + 0.5 * hi per axis, in lanes 0-2 of the result.  The
+    record's lanes 6-7 are replaced by zeros first: they hold an index, whose bits read as a
+    subnormal float, and arithmetic on subnormals takes a slow microcode path."""
+    zero = ir.Constant(_F32x8, [0.0] * 8)
+    box = _lanes(builder, record, zero, [0, 1, 2, 3, 4, 5, 8, 8])
+    swapped = _lanes(builder, record, zero, [3, 4, 5, 0, 1, 2, 8, 8])
     half = ir.Constant(_F32x8, [0.5] * 8)
-    return builder.fadd(builder.fmul(half, record), builder.fmul(half, swapped))
+    return builder.fadd(builder.fmul(half, box), builder.fmul(half, swapped))
 
 
 @intrinsic
@@ -60,7 +64,7 @@ def bin_record(typingctx, prims, i, cbox, scale, last, counts, boxes):
     """Add record ``prims[i]`` to the buckets of all three axes.
 
     The bucket on axis a is ``int(min((0.5 * lo + 0.5 * hi - cbox[a]) * scale[a], last))``,
-    as ``build._bin_of`` computes it.  ``cbox`` has at least four float32 and ``scale`` four
+    as ``split._bin_of`` computes it.  ``cbox`` has at least four float32 and ``scale`` four
     (the fourth lane is computed and dropped); ``counts`` is (3, bins) int64 and ``boxes``
     (3, bins, 8) float32 whose lanes 0-5 are a box.
     """

@@ -19,13 +19,13 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, parallel_chunksize, prange
 
-from raycore.bvh.build import (
+from raycore.bvh.build import BuildParams, build_binary_bvh
+from raycore.bvh.records import (
     BINARY_COUNT,
     BINARY_REF,
     FLOAT32_MAX,
     PRIM_INDEX,
-    BuildParams,
-    build_binary_bvh,
+    check_primitive_count,
     records_from_bounds,
 )
 
@@ -86,15 +86,20 @@ INTERNAL_AREA, LEAF_AREA, NODE_COUNT, LEAF_COUNT = range(4)
 
 
 @njit(cache=True, inline="always")
-def _count_node(refs, nodes, node, stats):
+def _place(nodes, refs, slots, slot_area, slot, node, stats):
+    """Put binary ``node`` in ``slots[slot]`` and add it to the tree statistics ``stats``;
+    ``slot_area`` gets its half-area if it is an internal node (one to open), else -1."""
+    slots[slot] = node
     count = refs[node, BINARY_COUNT]
     area = _half_area(nodes, node)
     stats[NODE_COUNT] += 1
     if count > 0:
         stats[LEAF_AREA] += area * count
         stats[LEAF_COUNT] += 1
+        slot_area[slot] = -1.0
     else:
         stats[INTERNAL_AREA] += area
+        slot_area[slot] = area
 
 
 @njit(cache=True)
@@ -128,9 +133,10 @@ def _collapse(nodes, refs, root, first_row, top_count, deferred, deferred_rows, 
     """
     wide_refs = wide.view(np.int32)
     slots = np.empty(WIDTH, np.int64)
+    slot_area = np.empty(WIDTH)
     slot_row = np.empty(WIDTH, np.int64)
     if count_root:
-        _count_node(refs, nodes, root, stats)
+        _place(nodes, refs, slots, slot_area, 0, root, stats)
     queue[0] = root
     rows = 1
     row = 0
@@ -140,28 +146,19 @@ def _collapse(nodes, refs, root, first_row, top_count, deferred, deferred_rows, 
         size = 1
         slots[0] = node  # a root leaf: a wide node with one child
         if refs[node, BINARY_COUNT] == 0:
-            slots[0] = refs[node, BINARY_REF]
-            slots[1] = refs[node, BINARY_REF] + 1
-            _count_node(refs, nodes, slots[0], stats)
-            _count_node(refs, nodes, slots[1], stats)
+            _place(nodes, refs, slots, slot_area, 0, refs[node, BINARY_REF], stats)
+            _place(nodes, refs, slots, slot_area, 1, refs[node, BINARY_REF] + 1, stats)
             size = 2
         while size < WIDTH:
             widest = -1
-            widest_area = 0.0
             for slot in range(size):
-                child = slots[slot]
-                if refs[child, BINARY_COUNT] == 0:
-                    area = _half_area(nodes, child)
-                    if widest < 0 or area > widest_area:
-                        widest = slot
-                        widest_area = area
+                if slot_area[slot] >= 0 and (widest < 0 or slot_area[slot] > slot_area[widest]):
+                    widest = slot
             if widest < 0:
                 break
             child = slots[widest]
-            slots[widest] = refs[child, BINARY_REF]
-            slots[size] = refs[child, BINARY_REF] + 1
-            _count_node(refs, nodes, slots[widest], stats)
-            _count_node(refs, nodes, slots[size], stats)
+            _place(nodes, refs, slots, slot_area, widest, refs[child, BINARY_REF], stats)
+            _place(nodes, refs, slots, slot_area, size, refs[child, BINARY_REF] + 1, stats)
             size += 1
         for slot in range(size):
             child = slots[slot]
@@ -283,8 +280,7 @@ def build_bvh_from_records(prims, lo, hi, params=None):
     params : BuildParams, optional
     """
     params = params or BuildParams()
-    if len(prims) == 0:
-        raise ValueError("cannot build a BVH over zero primitives")
+    check_primitive_count(len(prims))
     binary = build_binary_bvh(
         prims, int(params.bins), int(params.max_leaf_size), float(params.traversal_cost),
         float(params.intersection_cost))
@@ -313,7 +309,6 @@ def build_bvh(lo, hi, params=None):
     with :class:`BuildParams` (defaults when None)."""
     lo = np.ascontiguousarray(lo, dtype=np.float64)
     hi = np.ascontiguousarray(hi, dtype=np.float64)
-    if len(lo) == 0:
-        raise ValueError("cannot build a BVH over zero primitives")
+    check_primitive_count(len(lo))
     return build_bvh_from_records(records_from_bounds(lo, hi), lo.min(axis=0), hi.max(axis=0),
                                   params)

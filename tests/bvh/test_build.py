@@ -8,18 +8,16 @@ import numpy as np
 import pytest
 
 from raycore import Scene
-from raycore.bvh.build import (
+from raycore.bvh.build import CHUNK, MAX_DEPTH, MIN_TASK, BuildParams, build_binary_bvh
+from raycore.bvh.layout import COUNTS, REFS, WIDTH, build_bvh
+from raycore.bvh.records import (
     BINARY_COUNT,
     BINARY_REF,
-    MAX_DEPTH,
-    MIN_TASK,
-    PARALLEL_BINNING,
+    MAX_PRIMITIVES,
     PRIM_INDEX,
-    BuildParams,
-    build_binary_bvh,
+    check_primitive_count,
     records_from_bounds,
 )
-from raycore.bvh.layout import COUNTS, REFS, WIDTH, build_bvh
 from raycore.bvh.simd import LANES
 from raycore.mesh import Mesh
 
@@ -106,7 +104,7 @@ def binary_nodes(nodes):
     return np.array(rows), np.array(depths)
 
 
-@pytest.mark.parametrize("count", [1, 2, 7, 1000, 3 * MIN_TASK, 3 * PARALLEL_BINNING])
+@pytest.mark.parametrize("count", [1, 2, 7, 1000, 3 * MIN_TASK, 3 * CHUNK])
 def test_every_primitive_lands_in_exactly_one_leaf_that_contains_it(count):
     # float64 bounds rounded outwards to float32 boxes must still contain them exactly; the
     # two largest counts go through the top phase and the subtrees built in parallel, the
@@ -149,7 +147,7 @@ def test_boxes_beyond_float32_are_bounded_by_infinity():
     assert leaf_of[3][1][0] == np.inf and leaf_of[4][0][0] == -np.inf
 
 
-@pytest.mark.parametrize("count", [3000, 10 * MIN_TASK])
+@pytest.mark.parametrize("count", [3000, 3 * MIN_TASK])
 def test_reported_quality_matches_the_tree(count):
     lo, hi = random_boxes(count, seed=3)
     params = BuildParams(traversal_cost=1.5, intersection_cost=1.0)
@@ -195,7 +193,7 @@ def test_sah_prefers_fewer_tests_when_intersections_are_expensive():
 
 def test_the_tree_does_not_depend_on_the_number_of_threads():
     # enough primitives for the top phase to bin on all cores and leave many subtrees
-    lo, hi = random_boxes(40 * MIN_TASK, seed=11)
+    lo, hi = random_boxes(3 * CHUNK, seed=11)
     threads = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
@@ -273,6 +271,15 @@ def test_a_mesh_of_identical_triangles_builds_and_answers():
     scene.add_mesh(vertices, faces)
     hits = scene.intersect([[0.25, 0.25, 1.0]], [[0, 0, -1.0]])
     assert hits.t.tolist() == [1.0] and 0 <= hits.prim_id[0] < count
+
+
+def test_primitive_counts_the_tree_cannot_hold_raise():
+    with pytest.raises(ValueError, match="zero primitives"):
+        build_bvh(np.zeros((0, 3)), np.zeros((0, 3)))
+    # int32 indices and node references: a count past MAX_PRIMITIVES is refused up front
+    check_primitive_count(MAX_PRIMITIVES)
+    with pytest.raises(ValueError, match="at most"):
+        check_primitive_count(MAX_PRIMITIVES + 1)
 
 
 @pytest.mark.parametrize("field, value", [("bins", 1), ("max_leaf_size", 0),
