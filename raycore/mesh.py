@@ -16,6 +16,7 @@ from raycore.bvh.records import (
     round_down32,
     round_up32,
 )
+from raycore.bvh.simd import LANES
 from raycore.rays import as_float_array
 
 #: Faces per parallel work item of the passes over faces below.
@@ -132,7 +133,9 @@ class Mesh:
         lo, hi = (bound.astype(dtype).astype(np.float64) for bound in self.bounds)
         # let a rebuild's old tree go before the new one takes memory
         self.bvh = self.leaf_blocks = self.slot_face = self._built_for = None
-        bvh = build_bvh_from_records(triangle_records(vertices, self.faces), lo, hi, params)
+        # the SAH prices a leaf by the blocks its triangles fill
+        bvh = build_bvh_from_records(triangle_records(vertices, self.faces), lo, hi,
+                                     replace(params, block_size=LANES))
         self.leaf_blocks, self.slot_face = pack_leaves(bvh.nodes, bvh.refs, bvh.order, vertices,
                                                        self.faces, dtype)
         # slot_face replaces the leaf order, and the leaves now point at blocks

@@ -64,16 +64,22 @@ class BuildParams:
     max_leaf_size : int
         Largest leaf; nodes above it are always split.
     traversal_cost, intersection_cost : float
-        Relative costs of visiting a node and of one primitive test (tinybvh's c_trav, c_int).
+        Relative costs of visiting a node and of testing one leaf block (tinybvh's c_trav,
+        c_int).
+    block_size : int
+        Primitives a leaf tests at once: a leaf of n primitives costs ceil(n / block_size)
+        tests (a mesh's leaves are blocks of four triangles, :mod:`raycore.bvh.leaves`).
     """
 
     bins: int = 16
     max_leaf_size: int = 4
     traversal_cost: float = 1.0
     intersection_cost: float = 1.0
+    block_size: int = 1
 
     def __post_init__(self):
-        for name, low, high in (("bins", 2, 256), ("max_leaf_size", 1, 255)):
+        for name, low, high in (("bins", 2, 256), ("max_leaf_size", 1, 255),
+                                 ("block_size", 1, 16)):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or isinstance(value, bool):
                 raise ValueError(f"{name} must be an integer, got {value!r}")
@@ -139,7 +145,7 @@ def _build_subtree(prims, nodes, refs, root, start, end, root_cbox, depth, first
         elif hi - lo > 2:
             clear_bins(counts, boxes, used)
             bin_range(prims, lo, hi, cbox, scale, used, counts, boxes)
-            best = best_split(counts, boxes, scale, used, suffix)
+            best = best_split(counts, boxes, scale, used, suffix, costs[3])
         if made_leaf(nodes, refs, node, lo, hi, costs, best):
             continue
         mid = divide(prims, lo, hi, used, best, sides, cbox, scale)
@@ -210,7 +216,7 @@ def _bin_items(prims, items, cboxes, scales, bins):
 
 
 @njit(cache=True)
-def _choose_splits(item_first, item_counts, item_boxes, scales, bins):
+def _choose_splits(item_first, item_counts, item_boxes, scales, bins, block):
     """Merge each node's items' buckets and choose its split: (K, 3) float64 rows of axis,
     bucket and cost (axis -1: halve by count), as :func:`best_split` does.  Nodes of the top
     phase hold more than MIN_TASK records, more than any leaf, so they are always split."""
@@ -227,7 +233,7 @@ def _choose_splits(item_first, item_counts, item_boxes, scales, bins):
                         boxes[a, b, f] = min(boxes[a, b, f], item_boxes[i, a, b, f])
                         boxes[a, b, 3 + f] = max(boxes[a, b, 3 + f], item_boxes[i, a, b, 3 + f])
         best[k, 0], best[k, 1], best[k, 2] = best_split(counts, boxes, scales[k], bins,
-                                                          suffix)
+                                                          suffix, block)
     return best
 
 
@@ -315,7 +321,7 @@ def _swap_pieces(prims, runs, item_first, pieces):
             swap += 1
 
 
-def _split_top(prims, nodes, refs, bins, task_size):
+def _split_top(prims, nodes, refs, bins, block, task_size):
     """Top phase: split nodes one depth at a time until none holds more than ``task_size``
     primitives.  Each depth's nodes are cut into work items of CHUNK records, and each step
     (binning, partitioning, then trading misplaced records) runs over every item of the depth
@@ -355,7 +361,7 @@ def _split_top(prims, nodes, refs, bins, task_size):
         first = frontier[node_of, 1] + CHUNK * (np.arange(len(node_of)) - item_first[node_of])
         items = np.stack([first, np.minimum(first + CHUNK, frontier[node_of, 2]), node_of], 1)
         best = _choose_splits(item_first, *_bin_items(prims, items, cboxes, scales, bins),
-                              scales, bins)
+                              scales, bins, block)
         lefts, item_sides = _partition_items(prims, items, frontier, best, cboxes, scales, bins)
         runs, mids, pieces = _misplaced_runs(items, item_first, lefts, frontier, best)
         _swap_pieces(prims, runs, item_first, pieces)
@@ -420,15 +426,14 @@ class BinaryBVH:
     largest_subtree: int
 
 
-def build_binary_bvh(prims, bins, max_leaf_size, traversal_cost, intersection_cost):
+def build_binary_bvh(prims, params):
     """Build a binary BVH over primitive records, reordering them into leaf order in place.
 
     Parameters
     ----------
     prims : ndarray of float32, shape (F, PRIM_WIDTH)
         Primitive records (:mod:`raycore.bvh.records`); on return, in leaf order.
-    bins, max_leaf_size : int
-    traversal_cost, intersection_cost : float
+    params : BuildParams
 
     Returns
     -------
@@ -442,9 +447,11 @@ def build_binary_bvh(prims, bins, max_leaf_size, traversal_cost, intersection_co
     n = len(prims)
     nodes = _new_nodes(max(2 * n - 1, 1))
     refs = nodes.view(np.int32)
-    costs = np.array([max_leaf_size, traversal_cost, intersection_cost], np.float64)
+    bins = int(params.bins)
+    costs = np.array([params.max_leaf_size, params.traversal_cost, params.intersection_cost,
+                      params.block_size], np.float64)
     task_size = max(-(-n // TASKS), MIN_TASK)
-    tasks, task_cbox, made = _split_top(prims, nodes, refs, bins, task_size)
+    tasks, task_cbox, made = _split_top(prims, nodes, refs, bins, params.block_size, task_size)
     too_deep = made < 0
     if not too_deep:
         sizes = tasks[:, 2] - tasks[:, 1]

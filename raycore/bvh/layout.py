@@ -28,6 +28,7 @@ from raycore.bvh.records import (
     check_primitive_count,
     records_from_bounds,
 )
+from raycore.bvh.split import blocks_of
 
 WIDTH = 8
 NODE_WIDTH = 8 * WIDTH
@@ -81,20 +82,21 @@ def _half_area(nodes, node):
 
 
 #: Fields of a collapse's tree statistics (float64): summed half-areas of internal nodes and of
-#: leaves times their sizes, node count, leaf count.
+#: leaves times their blocks, node count, leaf count.
 INTERNAL_AREA, LEAF_AREA, NODE_COUNT, LEAF_COUNT = range(4)
 
 
 @njit(cache=True, inline="always")
-def _place(nodes, refs, slots, slot_area, slot, node, stats):
-    """Put binary ``node`` in ``slots[slot]`` and add it to the tree statistics ``stats``;
-    ``slot_area`` gets its half-area if it is an internal node (one to open), else -1."""
+def _place(nodes, refs, slots, slot_area, slot, node, stats, block):
+    """Put binary ``node`` in ``slots[slot]`` and add it to the tree statistics ``stats`` (a
+    leaf weighs its blocks of ``block`` primitives); ``slot_area`` gets its half-area if it is
+    an internal node (one to open), else -1."""
     slots[slot] = node
     count = refs[node, BINARY_COUNT]
     area = _half_area(nodes, node)
     stats[NODE_COUNT] += 1
     if count > 0:
-        stats[LEAF_AREA] += area * count
+        stats[LEAF_AREA] += area * blocks_of(count, block)
         stats[LEAF_COUNT] += 1
         slot_area[slot] = -1.0
     else:
@@ -104,7 +106,7 @@ def _place(nodes, refs, slots, slot_area, slot, node, stats):
 
 @njit(cache=True)
 def _collapse(nodes, refs, root, first_row, top_count, deferred, deferred_rows, queue, wide,
-              write, count_root, stats):
+              write, count_root, stats, block):
     """Group the binary nodes below ``root`` into wide nodes of up to WIDTH children, breadth
     first, as rows ``first_row, first_row + 1, ...`` of ``wide``.
 
@@ -136,7 +138,7 @@ def _collapse(nodes, refs, root, first_row, top_count, deferred, deferred_rows, 
     slot_area = np.empty(WIDTH)
     slot_row = np.empty(WIDTH, np.int64)
     if count_root:
-        _place(nodes, refs, slots, slot_area, 0, root, stats)
+        _place(nodes, refs, slots, slot_area, 0, root, stats, block)
     queue[0] = root
     rows = 1
     row = 0
@@ -146,8 +148,8 @@ def _collapse(nodes, refs, root, first_row, top_count, deferred, deferred_rows, 
         size = 1
         slots[0] = node  # a root leaf: a wide node with one child
         if refs[node, BINARY_COUNT] == 0:
-            _place(nodes, refs, slots, slot_area, 0, refs[node, BINARY_REF], stats)
-            _place(nodes, refs, slots, slot_area, 1, refs[node, BINARY_REF] + 1, stats)
+            _place(nodes, refs, slots, slot_area, 0, refs[node, BINARY_REF], stats, block)
+            _place(nodes, refs, slots, slot_area, 1, refs[node, BINARY_REF] + 1, stats, block)
             size = 2
         while size < WIDTH:
             widest = -1
@@ -157,8 +159,9 @@ def _collapse(nodes, refs, root, first_row, top_count, deferred, deferred_rows, 
             if widest < 0:
                 break
             child = slots[widest]
-            _place(nodes, refs, slots, slot_area, widest, refs[child, BINARY_REF], stats)
-            _place(nodes, refs, slots, slot_area, size, refs[child, BINARY_REF] + 1, stats)
+            first = refs[child, BINARY_REF]
+            _place(nodes, refs, slots, slot_area, widest, first, stats, block)
+            _place(nodes, refs, slots, slot_area, size, first + 1, stats, block)
             size += 1
         for slot in range(size):
             child = slots[slot]
@@ -205,7 +208,8 @@ def _write_row(nodes, refs, wide, wide_refs, row, slots, slot_row, size):
 
 
 @njit(cache=True, parallel=True)
-def _collapse_subtrees(nodes, refs, roots, queue_size, first_rows, wide, write, stats, rows):
+def _collapse_subtrees(nodes, refs, roots, queue_size, first_rows, wide, write, stats, rows,
+                       block):
     """:func:`_collapse` below each of ``roots`` on all cores; ``stats`` (T, 4) and ``rows``
     (T,) receive each one's figures.  ``queue_size`` bounds any one's rows."""
     none = np.empty(0, np.int64)
@@ -213,11 +217,11 @@ def _collapse_subtrees(nodes, refs, roots, queue_size, first_rows, wide, write, 
         queue = np.empty(queue_size, np.int64)
         own = np.zeros(4)  # not a row of stats, which neighbouring subtrees' threads share
         rows[t], _ = _collapse(nodes, refs, roots[t], first_rows[t], 0, none, none, queue, wide,
-                               write, False, own)
+                               write, False, own, block)
         stats[t] = own
 
 
-def _wide_layout(binary, prim_count):
+def _wide_layout(binary, prim_count, block):
     """Collapse a :class:`~raycore.bvh.build.BinaryBVH` into wide rows: (nodes, stats), with
     stats the tree statistics (see INTERNAL_AREA), summed in an order that does not depend on
     the number of threads.
@@ -235,14 +239,15 @@ def _wide_layout(binary, prim_count):
     if binary.top_count == 1:
         # one subtree, the whole tree
         queue = np.empty(max(prim_count, 1), np.int64)
-        rows, _ = _collapse(nodes, refs, 0, 0, 0, none, none, queue, empty, False, True, stats)
+        rows, _ = _collapse(nodes, refs, 0, 0, 0, none, none, queue, empty, False, True, stats,
+                            block)
         wide = _new_rows(rows)
-        _collapse(nodes, refs, 0, 0, 0, none, none, queue, wide, True, True, np.zeros(4))
+        _collapse(nodes, refs, 0, 0, 0, none, none, queue, wide, True, True, np.zeros(4), block)
         return wide, stats
     queue = np.empty(binary.top_count, np.int64)
     deferred = np.empty(WIDTH * binary.top_count, np.int64)
     top_rows, count = _collapse(nodes, refs, 0, 0, binary.top_count, deferred, none, queue,
-                                empty, False, True, stats)
+                                empty, False, True, stats, block)
     deferred = deferred[:count]
     # a subtree over m primitives has at most m - 1 internal nodes, one per wide row
     queue_size = binary.largest_subtree
@@ -250,14 +255,14 @@ def _wide_layout(binary, prim_count):
     sub_rows = np.empty(count, np.int64)
     with parallel_chunksize(1):
         _collapse_subtrees(nodes, refs, deferred, queue_size, np.zeros(count, np.int64), empty,
-                           False, sub_stats, sub_rows)
+                           False, sub_stats, sub_rows, block)
     first_rows = top_rows + np.concatenate([[0], np.cumsum(sub_rows)[:-1]]).astype(np.int64)
     wide = _new_rows(top_rows + int(sub_rows.sum()))
     _collapse(nodes, refs, 0, 0, binary.top_count, none, first_rows, queue, wide, True, True,
-              np.zeros(4))
+              np.zeros(4), block)
     with parallel_chunksize(1):
         _collapse_subtrees(nodes, refs, deferred, queue_size, first_rows, wide, True, sub_stats,
-                           sub_rows)
+                           sub_rows, block)
     for part in sub_stats:
         stats += part
     return wide, stats
@@ -281,10 +286,8 @@ def build_bvh_from_records(prims, lo, hi, params=None):
     """
     params = params or BuildParams()
     check_primitive_count(len(prims))
-    binary = build_binary_bvh(
-        prims, int(params.bins), int(params.max_leaf_size), float(params.traversal_cost),
-        float(params.intersection_cost))
-    nodes, stats = _wide_layout(binary, len(prims))
+    binary = build_binary_bvh(prims, params)
+    nodes, stats = _wide_layout(binary, len(prims), params.block_size)
     root_area = float(_half_area(binary.nodes, 0))
     binary_depth = binary.depth
     del binary  # its nodes are the build's largest temporary after the records

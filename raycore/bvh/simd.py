@@ -131,31 +131,36 @@ def watertight4(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tm
             out_v = args
         scalar = context.get_value_type(signature.args[2])
         vector = ir.VectorType(scalar, LANES)
+        int64 = ir.IntType(64)
         table = context.make_array(signature.args[0])(context, builder, blocks_v)
         start = cgutils.get_item_pointer(context, builder, signature.args[0], table,
-                                         [block_v, ir.Constant(ir.IntType(64), 0)])
+                                         [block_v, ir.Constant(int64, 0)])
         first = builder.bitcast(start, vector.as_pointer())
-        planes = [builder.load(builder.gep(first, [ir.Constant(ir.IntType(64), k)]), align=1)
-                  for k in range(9)]
 
         def splat(value):
             return _splat(builder, vector, value)
 
         def pick(k, x, y, z):
-            # component k (a per-ray axis, 0..2) of the vector triple (x, y, z)
+            # component k (a per-ray axis, 0..2) of the scalar triple (x, y, z)
             is0 = builder.icmp_signed("==", k, ir.Constant(k.type, 0))
             is1 = builder.icmp_signed("==", k, ir.Constant(k.type, 1))
             return builder.select(is0, x, builder.select(is1, y, z))
 
-        origin = [splat(ox_v), splat(oy_v), splat(oz_v)]
+        def relative(vertex, k):
+            # axis k of a vertex's four lanes, less the origin: the permutation is an offset
+            # into the block, so the axes are loaded in the order the ray needs them
+            plane = builder.gep(first, [builder.add(ir.Constant(int64, 3 * vertex),
+                                                    builder.sext(k, int64))])
+            origin = splat(pick(k, ox_v, oy_v, oz_v))
+            return builder.fsub(builder.load(plane, align=1), origin)
+
         shear_x, shear_y, scale = splat(sx_v), splat(sy_v), splat(sz_v)
         sheared = []
         for vertex in range(3):
             # translate by the origin, permute so that kz is forward, shear onto +z
-            rel = [builder.fsub(planes[3 * vertex + a], origin[a]) for a in range(3)]
-            along = pick(kz_v, *rel)
-            px = builder.fsub(pick(kx_v, *rel), builder.fmul(shear_x, along))
-            py = builder.fsub(pick(ky_v, *rel), builder.fmul(shear_y, along))
+            along = relative(vertex, kz_v)
+            px = builder.fsub(relative(vertex, kx_v), builder.fmul(shear_x, along))
+            py = builder.fsub(relative(vertex, ky_v), builder.fmul(shear_y, along))
             sheared.append((px, py, along))
         (a_x, a_y, a_z), (b_x, b_y, b_z), (c_x, c_y, c_z) = sheared
 
@@ -191,22 +196,30 @@ def watertight4(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tm
         lo, hi = splat(lo_v), splat(hi_v)
         in_range = builder.and_(builder.fcmp_ordered(">=", t_det, builder.fmul(lo, det)),
                                 builder.fcmp_ordered("<=", t_det, builder.fmul(hi, det)))
-        t = builder.fdiv(t_det, det)
-        # det != 0, and t is not NaN (inf / inf when the edge functions overflow)
-        valid = builder.and_(builder.fcmp_ordered("!=", det, zero),
-                             builder.fcmp_ordered("==", t, t))
-        hit = builder.and_(builder.and_(inside, in_range), valid)
-        hit = builder.and_(hit, builder.not_(exact))
-        # t/det can round one ulp past a bound that the product test accepted: clamp into range
-        t = builder.select(builder.fcmp_ordered("<", t, lo), lo, t)
-        t = builder.select(builder.fcmp_ordered(">", t, hi), hi, t)
-        result = context.make_array(signature.args[13])(context, builder, out_v)
-        store = builder.bitcast(result.data, vector.as_pointer())
-        for k, value in enumerate((t, builder.fdiv(v_b, det), builder.fdiv(w_c, det))):
-            builder.store(value, builder.gep(store, [ir.Constant(ir.IntType(64), k)]), align=1)
+        candidate = builder.and_(builder.and_(inside, in_range),
+                                 builder.fcmp_ordered("!=", det, zero))
+        candidate = builder.and_(candidate, builder.not_(exact))
         bits = ir.IntType(LANES)
-        hit_bits = builder.zext(builder.bitcast(hit, bits), ir.IntType(64))
-        exact_bits = builder.zext(builder.bitcast(exact, bits), ir.IntType(64))
-        return builder.or_(hit_bits, builder.shl(exact_bits, ir.Constant(ir.IntType(64), LANES)))
+        exact_bits = builder.zext(builder.bitcast(exact, bits), int64)
+        # Most blocks hit nothing: the three divisions wait until a lane is a candidate.
+        before = builder.basic_block
+        with builder.if_then(builder.icmp_unsigned("!=", builder.bitcast(candidate, bits),
+                                                   ir.Constant(bits, 0)), likely=False):
+            t = builder.fdiv(t_det, det)
+            # t is not NaN (inf / inf when the edge functions overflow)
+            hit = builder.and_(candidate, builder.fcmp_ordered("==", t, t))
+            # t/det can round one ulp past a bound that the product test accepted: clamp
+            t = builder.select(builder.fcmp_ordered("<", t, lo), lo, t)
+            t = builder.select(builder.fcmp_ordered(">", t, hi), hi, t)
+            result = context.make_array(signature.args[13])(context, builder, out_v)
+            store = builder.bitcast(result.data, vector.as_pointer())
+            for k, value in enumerate((t, builder.fdiv(v_b, det), builder.fdiv(w_c, det))):
+                builder.store(value, builder.gep(store, [ir.Constant(int64, k)]), align=1)
+            found = builder.zext(builder.bitcast(hit, bits), int64)
+            tested = builder.basic_block
+        hit_bits = builder.phi(int64)
+        hit_bits.add_incoming(ir.Constant(int64, 0), before)
+        hit_bits.add_incoming(found, tested)
+        return builder.or_(hit_bits, builder.shl(exact_bits, ir.Constant(int64, LANES)))
 
     return sig, codegen

@@ -67,10 +67,17 @@ def _half_area(lox, loy, loz, hix, hiy, hiz):
     return dx * dy + dy * dz + dz * dx
 
 
+@njit(cache=True, inline="always")
+def blocks_of(count, block):
+    """Leaf blocks that ``count`` primitives fill, ``block`` to a block."""
+    return (count + block - 1) // block
+
+
 @njit(cache=True)
-def best_split(counts, boxes, scale, bins, suffix):
+def best_split(counts, boxes, scale, bins, suffix, block):
     """Cheapest bucket boundary: (axis, bucket, cost) with cost = sum of the children's
-    half-areas times their primitive counts, or axis -1 when no axis has two non-empty sides.
+    half-areas times their leaf blocks (``block`` primitives to a block, tested at once, as
+    Embree's builder prices Triangle4 leaves), or axis -1 when no axis has two non-empty sides.
 
     Boundaries next to empty buckets repeat a partition already priced, so only the boundary
     after each non-empty bucket is priced (the first of equally cheap ones wins, as in a sweep
@@ -109,7 +116,8 @@ def best_split(counts, boxes, scale, bins, suffix):
             total += counts[a, b - 1]
             if suffix[1, b] == 0:
                 break
-            cost = _half_area(lx, ly, lz, hx, hy, hz) * total + suffix[0, b] * suffix[1, b]
+            cost = (_half_area(lx, ly, lz, hx, hy, hz) * blocks_of(total, block)
+                    + suffix[0, b] * blocks_of(suffix[1, b], block))
             if cost < best_cost:
                 best_cost = cost
                 best_axis = a
@@ -227,12 +235,12 @@ def bound_range(prims, start, end, sides, side):
 def made_leaf(nodes, refs, node, start, end, costs, best):
     """Make ``node`` (primitives ``start:end``) a leaf and return True when that costs no more
     than its cheapest split ``best`` (axis, bucket, cost), or when it cannot be split and fits;
-    ``costs`` is (max_leaf_size, traversal_cost, intersection_cost)."""
+    ``costs`` is (max_leaf_size, traversal_cost, intersection_cost, block_size)."""
     size = end - start
     best_axis, _, best_cost = best
     area = _half_area(nodes[node, 0], nodes[node, 1], nodes[node, 2], nodes[node, 3],
                       nodes[node, 4], nodes[node, 5])
-    leaf_cost = costs[2] * size
+    leaf_cost = costs[2] * blocks_of(size, costs[3])
     split_cost = costs[1] + costs[2] * best_cost / area if area > 0 else np.inf
     make_leaf = size == 1 or (size <= costs[0] and leaf_cost <= split_cost)
     if make_leaf or (best_axis < 0 and size <= costs[0]):

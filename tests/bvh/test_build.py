@@ -158,8 +158,7 @@ def test_reported_quality_matches_the_tree(count):
 
     # MacDonald–Booth cost of the binary tree the wide one was collapsed from, recomputed
     prims = records_from_bounds(lo, hi)
-    binary = build_binary_bvh(prims, params.bins, params.max_leaf_size, params.traversal_cost,
-                              params.intersection_cost)
+    binary = build_binary_bvh(prims, params)
     assert np.array_equal(prims.view(np.int32)[:, PRIM_INDEX], bvh.order)
     nodes, depth = binary.nodes, binary.depth
     rows, depths = binary_nodes(nodes)

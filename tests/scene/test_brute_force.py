@@ -228,7 +228,9 @@ def test_stats_report_tree_quality():
         assert tree["nodes"] == 2 * tree["leaves"] - 1
     # scaling both costs keeps every split decision, so the tree, and scales its cost (the
     # costs are the meshes' trees'; the top level over objects keeps the default ones)
-    double = spec.scene("float32", traversal_cost=2.0, intersection_cost=0.8).stats()
+    costs = scene.build_params
+    double = spec.scene("float32", traversal_cost=2 * costs.traversal_cost,
+                        intersection_cost=2 * costs.intersection_cost).stats()
     assert double["top"] == stats["top"]
     for tree, twice in zip(stats["meshes"], double["meshes"], strict=True):
         assert (twice["nodes"], twice["leaves"], twice["depth"]) == (
