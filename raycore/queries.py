@@ -40,17 +40,17 @@ SERIAL_BELOW = 1024
 
 
 @njit(cache=True, parallel=True, _nrt=False)
-def _trace_parallel(scene, mode, test, sphere_method, origins, directions, tmin, tmax, order,
-                    out_t, out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t,
+def _trace_parallel(scene, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
+                    out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t,
                     hits_obj, hits_prim, int_scratch, real_scratch, capacity, first_bad):
     # first_bad[chunk]: the chunk's first refused ray (a reduction would allocate)
     n = len(origins)
     for chunk in prange(len(first_bad)):
         thread = get_thread_id()
         first_bad[chunk] = trace_range(
-            scene, mode, test, sphere_method, origins, directions, tmin, tmax, order,
-            chunk * CHUNK, min(n, (chunk + 1) * CHUNK), out_t, out_obj, out_prim, out_hit, out_u,
-            out_v, out_slot, offsets, hits_t, hits_obj, hits_prim, int_scratch[thread],
+            scene, mode, test, sphere_method, origins, directions, tmin, tmax, chunk * CHUNK,
+            min(n, (chunk + 1) * CHUNK), out_t, out_obj, out_prim, out_hit, out_u, out_v,
+            out_slot, offsets, hits_t, hits_obj, hits_prim, int_scratch[thread],
             real_scratch[thread], capacity)
 
 
@@ -59,9 +59,8 @@ def _trace_in_parallel(record, mode, test, sphere_method, origins, directions, t
                        out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t,
                        hits_obj, hits_prim, int_scratch, real_scratch, capacity):
     first_bad = np.empty((len(origins) + CHUNK - 1) // CHUNK, np.int64)
-    order = _NO_ORDER
     _trace_parallel(arrays_of(record), mode, test, sphere_method, origins, directions, tmin,
-                    tmax, order, out_t, out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets,
+                    tmax, out_t, out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets,
                     hits_t, hits_obj, hits_prim, int_scratch, real_scratch, capacity, first_bad)
     return first_bad.min()
 
@@ -71,13 +70,9 @@ def _trace_here(record, mode, test, sphere_method, origins, directions, tmin, tm
                 out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t, hits_obj,
                 hits_prim, int_scratch, real_scratch, capacity):
     return trace_range(arrays_of(record), mode, test, sphere_method, origins, directions, tmin,
-                       tmax, _NO_ORDER, 0, len(origins), out_t, out_obj, out_prim, out_hit,
-                       out_u, out_v, out_slot, offsets, hits_t, hits_obj, hits_prim, int_scratch[0],
+                       tmax, 0, len(origins), out_t, out_obj, out_prim, out_hit, out_u, out_v,
+                       out_slot, offsets, hits_t, hits_obj, hits_prim, int_scratch[0],
                        real_scratch[0], capacity)
-
-
-#: The rays' own order (a global array is a constant to the compiled code: no allocation).
-_NO_ORDER = np.empty(0, np.int64)
 
 
 class _Scratch(threading.local):

@@ -462,23 +462,22 @@ def _face_id(scene, obj, prim):
 
 
 @njit(cache=True, inline="always")
-def _bad_ray(origins, directions, tmin, tmax, k, i, step):
-    """Whether ray ``i`` (row ``k`` of ``origins`` and ``directions``) is one the library
-    refuses: a non-finite coordinate, a zero direction, or a NaN bound (the caller finds out
-    which and says so)."""
+def _bad_ray(origins, directions, tmin, tmax, i, step):
+    """Whether ray ``i`` is one the library refuses: a non-finite coordinate, a zero direction,
+    or a NaN bound (the caller finds out which and says so)."""
     fine = True
     nonzero = False
     for a in range(3):
-        fine &= np.isfinite(origins[k, a]) and np.isfinite(directions[k, a])
-        nonzero |= directions[k, a] != 0
+        fine &= np.isfinite(origins[i, a]) and np.isfinite(directions[i, a])
+        nonzero |= directions[i, a] != 0
     lo = tmin[i * step]
     hi = tmax[i * step]
     return not (fine and nonzero and lo == lo and hi == hi)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
-def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tmax, order, start,
-                stop, out_t, out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t,
+def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tmax, start, stop,
+                out_t, out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t,
                 hits_obj, hits_prim, int_row, real_row, capacity):
     """Trace rays ``start .. stop - 1``, checking each first.
 
@@ -487,13 +486,8 @@ def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tma
     scene : SceneArrays
     mode, test, sphere_method : int
     origins, directions : ndarray, shape (N, 3)
-        The rays, in the order given by ``order``.
     tmin, tmax : ndarray, shape (N,) or (1,)
-        Per-ray bounds (in the caller's order), or one for every ray.
-    order : ndarray of int64, shape (N,) or (0,)
-        Row k of ``origins`` and ``directions`` is the caller's ray ``order[k]``, to which its
-        answers go (:func:`raycore.ray_order.ray_order`); empty when the rows are in the
-        caller's order.
+        Per-ray bounds, or one for every ray.
     start, stop : int
     out_t, out_obj, out_prim : ndarray, shape (N,) or (0,)
         CLOSEST: t (inf on a miss), object (-1 on a miss) and primitive id (face index, or 0 for
@@ -523,15 +517,13 @@ def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tma
     hit_t = real_row[REAL_FIXED:REAL_FIXED + capacity]
     barycentrics = len(out_u) > 0
     first_bad = n
-    for k in range(start, stop):
-        # ray k of the arrays; its answers go to ray i of the caller's order
-        i = order[k] if len(order) else k
-        if _bad_ray(origins, directions, tmin, tmax, k, i, step):
+    for i in range(start, stop):
+        if _bad_ray(origins, directions, tmin, tmax, i, step):
             first_bad = min(first_bad, i)
             continue
         t, obj, prim, u, v, found = trace_ray(
-            scene, mode, test, sphere_method, origins[k, 0], origins[k, 1], origins[k, 2],
-            directions[k, 0], directions[k, 1], directions[k, 2], tmin[i * step],
+            scene, mode, test, sphere_method, origins[i, 0], origins[i, 1], origins[i, 2],
+            directions[i, 0], directions[i, 1], directions[i, 2], tmin[i * step],
             tmax[i * step], int_row, real_row, hit_t, hit_obj, hit_prim)
         if mode == ANY:
             out_hit[i] = obj >= 0
