@@ -98,8 +98,8 @@ class MeshInfo(BaseModel):
 
 
 class Material(Strict):
-    color: Annotated[list[Unit], Field(min_length=3, max_length=3)] = Field(description="Linear RGB in [0, 1], used by lambert "
-                                                        "renders")
+    color: Annotated[list[Unit], Field(min_length=3, max_length=3)] = Field(
+        description="Linear RGB in [0, 1], used by lambert renders")
 
 
 class Shape(Strict):
