@@ -44,7 +44,9 @@ test-py313:
 	@test -n "$(PYTHON313)" || (echo "test-py313 needs Python 3.13 (python3.13, or pyenv's)"; exit 2)
 	$(MAKE) test PYTHON="$(PYTHON313)" VENV=.venv-py313 TESTS="$(PY313_TESTS)"
 
-# Schemathesis against every operation, longer than the bounded run inside `make test`.
+# Schemathesis (`schemathesis run --checks all`, schemathesis.toml) against a real service with
+# and without an API key, FUZZ_EXAMPLES cases per operation and phase: longer than the bounded
+# run (60) inside `make test`; and the hypothesis fuzzers and hostile inputs.
 FUZZ_EXAMPLES ?= 500
 fuzz: $(VENV)/.dev-installed
 	RAYCORE_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(BIN)/python -m pytest -p no:cacheprovider \

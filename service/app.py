@@ -11,16 +11,20 @@ from contextlib import asynccontextmanager
 from importlib.metadata import version
 
 import anyio
-from fastapi import FastAPI, HTTPException
+from fastapi import Depends, FastAPI, HTTPException
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from service.auth import require_api_key
 from service.config import Settings, load_settings
 from service.demo import load_demo
 from service.errors import ClientError
+from service.methods import Methods
+from service.openapi import document
 from service.routes import health, meshes, scenes
 from service.runtime import Runtime
+from service.schemas import error_responses
 from service.store import Store
 
 logger = logging.getLogger("raycore.service")
@@ -30,12 +34,15 @@ DESCRIPTION = """Ray queries and renders over HTTP, answered by `raycore.Scene`.
 Upload meshes (`POST /v1/meshes`), build scenes from JSON (`POST /v1/scenes`), then cast ray
 batches at them (`POST /v1/scenes/{id}/intersect`, JSON or .npy both ways) or render PNGs
 (`POST /v1/scenes/{id}/render`).  Scene and mesh ids are content hashes; `demo` names a built-in
-scene.  Errors are answered as `{"detail": "..."}` with a 4xx status.
+scene.  Errors are answered as `{"detail": "..."}` with a 4xx status.  This document describes
+the running service: its limits (`RAYCORE_*`) are the schemas' maxima.
+"""
 
-When the service is configured with an API key (`RAYCORE_API_KEY`), the endpoints that change
-the store (uploads, scene builds, deletions) need it, as `X-API-Key: <key>` or
-`Authorization: Bearer <key>`, and answer 401 without it; queries, renders and descriptions
-need no key.
+#: Added to the description when an API key is configured (and the operations say so).
+KEY_DESCRIPTION = """
+This service is configured with an API key: the endpoints that change the store (uploads, scene
+builds, deletions) need it, as `X-API-Key: <key>` or `Authorization: Bearer <key>`, and answer
+401 without it; queries, renders, listings and descriptions need no key.
 """
 
 
@@ -75,9 +82,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     """
     settings = load_settings() if settings is None else settings
     _tune_malloc()
-    app = FastAPI(title="raycore", version=version("raycore"), description=DESCRIPTION,
+    keyed = settings.api_key is not None
+    app = FastAPI(title="raycore", version=version("raycore"),
+                  description=DESCRIPTION + (KEY_DESCRIPTION if keyed else ""),
                   lifespan=_lifespan)
     app.state.runtime = Runtime(settings, Store(settings.store_bytes))
+    app.add_middleware(Methods)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes,
                        seconds=settings.body_seconds)
     app.add_middleware(ServerTiming)
@@ -87,6 +97,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_exception_handler(Exception, _unexpected)
     for module in (health, meshes, scenes):
         app.include_router(module.router)
+    # the routes that change the store need the key, and the document declares its security,
+    # only when a key is configured
+    guard = {"dependencies": [Depends(require_api_key)],
+             "responses": error_responses(401)} if keyed else {}
+    for module in (meshes, scenes):
+        app.include_router(module.guarded, **guard)
+    app.openapi = lambda: document(app, settings)
     return app
 
 

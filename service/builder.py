@@ -13,7 +13,7 @@ import numpy as np
 from raycore import Scene
 from raycore.mesh import load_trimesh
 from raycore.render import DEFAULT_COLOR
-from service.errors import ClientError, LimitExceeded
+from service.errors import ClientError, LimitExceeded, NotFound
 from service.schemas import Bounds, MeshInfo, SceneInfo, SceneSpec
 from service.store import ENTRY_OVERHEAD, content_id
 
@@ -125,6 +125,11 @@ def build_scene(spec: SceneSpec, find_mesh, max_triangles):
         When the scene would store more than ``max_triangles`` triangles.
     """
     start = time.perf_counter()
+    for index, obj in enumerate(spec.objects):
+        if obj.type == "mesh" and obj.faces is not None and len(obj.faces) > max_triangles:
+            # the document's maxItems: invalid, where only the whole scene's count is too large
+            raise ClientError(f"objects[{index}].faces: {len(obj.faces)} triangles; the limit is "
+                              f"{max_triangles}")
     uploads = _uploaded_meshes(spec, find_mesh)
     triangles = sum(len(mesh.faces) for mesh in uploads.values()) + sum(
         len(obj.faces) for obj in spec.objects if obj.type == "mesh" and obj.mesh is None)
@@ -171,7 +176,7 @@ def _uploaded_meshes(spec, find_mesh):
         if isinstance(name, str) and name not in uploads:
             entry = find_mesh(name)
             if entry is None:
-                raise ClientError(f"objects[{index}].mesh: no mesh {name!r} (upload it with "
+                raise NotFound(f"objects[{index}].mesh: no mesh {name!r} (upload it with "
                                   "POST /v1/meshes)")
             uploads[name] = entry
     return uploads

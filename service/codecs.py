@@ -125,7 +125,8 @@ def read_npy(body):
 def rays_from_npy(array, tmin, tmax):
     """Split an (N, 6) or (N, 8) ray array (origin, direction[, tmin, tmax]) into columns.
 
-    ``tmin``/``tmax`` (from the URL) apply to (N, 6) rays; (N, 8) rays carry their own.
+    ``tmin``/``tmax`` (from the URL; None when not given) apply to (N, 6) rays; (N, 8) rays
+    carry their own, which win.
 
     Returns
     -------
@@ -135,8 +136,6 @@ def rays_from_npy(array, tmin, tmax):
     if array.ndim != 2 or array.shape[1] not in (6, 8):
         raise ClientError(f"the .npy rays must have shape (N, 6) or (N, 8), got {array.shape}")
     if array.shape[1] == 8:
-        if tmin is not None or tmax is not None:
-            raise ClientError("(N, 8) rays carry tmin and tmax: leave them out of the URL")
         return array[:, :3], array[:, 3:6], array[:, 6], array[:, 7]
     return (array[:, :3], array[:, 3:6], 0.0 if tmin is None else tmin,
             np.inf if tmax is None else tmax)

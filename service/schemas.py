@@ -1,16 +1,48 @@
 """Request and response models of the HTTP API (pydantic v2), with the examples OpenAPI shows.
 
-Shapes mirror the arguments of ``raycore.Scene.add_*``; geometry is checked here only as far as
-JSON types go (finite numbers, 3-vectors) and the library checks the rest.
+Shapes mirror the arguments of ``raycore.Scene.add_*``.  Every rule that JSON Schema can state is
+stated here, so that the OpenAPI document says it (numbers are strict: no booleans or strings;
+coordinates are bounded; radii are positive); the library checks what it cannot (e.g. that a
+box's ``lo`` is below its ``hi``), and those rules are listed in the operations' descriptions.
+
+3-vectors are arrays of three numbers rather than tuples: a tuple's ``prefixItems`` inside
+``anyOf`` is rewritten into a draft-4 ``items`` list by schemathesis 4.x, which then cannot
+validate answers against it.
 """
 
+from datetime import datetime
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
-Vec3 = tuple[float, float, float]
-Matrix = Annotated[list[list[float]], Field(
-    description="4x4 affine transform, row-major (last row 0, 0, 0, 1); a 3x4 is accepted too")]
+#: Bound of every coordinate and length a request gives (Embree's range, 1.844e18): squares and
+#: products of such numbers still fit float32, so that no valid request overflows a kernel.
+COORDINATE_LIMIT = 1.844e18
+Coordinate = Annotated[float, Field(ge=-COORDINATE_LIMIT, le=COORDINATE_LIMIT)]
+Vec3 = Annotated[list[Coordinate], Field(min_length=3, max_length=3)]
+Face = Annotated[list[Annotated[int, Field(ge=0)]], Field(min_length=3, max_length=3)]
+Radius = Annotated[float, Field(gt=0, le=COORDINATE_LIMIT)]
+#: 3-vectors in answers: unbounded (they come from the scene's arithmetic).
+Point = Annotated[list[float], Field(min_length=3, max_length=3)]
+Row = Annotated[list[Coordinate], Field(min_length=4, max_length=4)]
+AFFINE_ROW = [0.0, 0.0, 0.0, 1.0]
+
+
+def _affine(rows):
+    if len(rows) == 4 and rows[3] != AFFINE_ROW:
+        raise ValueError(f"the last row of a 4x4 transform must be {AFFINE_ROW}")
+    return rows
+
+
+def _affine_schema(schema):
+    # the first three rows as any row, a fourth one only [0, 0, 0, 1]
+    schema["prefixItems"] = [schema["items"]] * 3 + [{"const": AFFINE_ROW}]
+
+
+Matrix = Annotated[list[Row], AfterValidator(_affine), Field(
+    min_length=3, max_length=4, json_schema_extra=_affine_schema,
+    description="Affine transform, row-major: 3x4, or 4x4 whose last row is [0, 0, 0, 1]; it "
+                "must be invertible")]
 DType = Literal["float32", "float64"]
 TriangleTest = Literal["watertight", "moller", "geometric"]
 QueryKind = Literal["closest", "any", "all", "count"]
@@ -26,7 +58,7 @@ EXAMPLE_SCENE_ID = "0c5b7e2a9d1f4e3b8a6c2d0e1f3a5b7c"
 class Strict(BaseModel):
     """Unknown keys and non-finite numbers are errors, not silently dropped or passed on."""
 
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True)
 
 
 class Error(BaseModel):
@@ -44,8 +76,8 @@ class Error(BaseModel):
 
 
 class Bounds(BaseModel):
-    lo: Vec3
-    hi: Vec3
+    lo: Point
+    hi: Point
 
 
 class MeshInfo(BaseModel):
@@ -66,8 +98,8 @@ class MeshInfo(BaseModel):
 
 
 class Material(Strict):
-    color: tuple[Unit, Unit, Unit] = Field(description="Linear RGB in [0, 1], used by lambert "
-                                                        "renders")
+    color: Annotated[list[Unit], Field(min_length=3, max_length=3)] = Field(
+        description="Linear RGB in [0, 1], used by lambert renders")
 
 
 class Shape(Strict):
@@ -77,7 +109,7 @@ class Shape(Strict):
 class Sphere(Shape):
     type: Literal["sphere"]
     center: Vec3
-    radius: float
+    radius: Radius
 
 
 class Plane(Shape):
@@ -90,28 +122,29 @@ class Disk(Shape):
     type: Literal["disk"]
     center: Vec3
     normal: Vec3
-    radius: float
+    radius: Radius
 
 
 class Box(Shape):
     type: Literal["box"]
     lo: Vec3
     hi: Vec3
-    transform: Matrix | None = None
+    transform: Matrix = Field(default_factory=lambda: [row[:] for row in IDENTITY],
+                              description="Affine transform of the box (default: none)")
 
 
 class Cylinder(Shape):
     type: Literal["cylinder"]
     p0: Vec3
     p1: Vec3
-    radius: float
+    radius: Radius
 
 
 class Cone(Shape):
     type: Literal["cone"]
     base_center: Vec3
     apex: Vec3
-    radius: float
+    radius: Radius
 
 
 class MeshObject(Shape):
@@ -119,8 +152,9 @@ class MeshObject(Shape):
 
     type: Literal["mesh"]
     mesh: str | None = Field(None, description="Id from POST /v1/meshes")
-    vertices: list[Vec3] | None = None
-    faces: list[tuple[int, int, int]] | None = None
+    vertices: Annotated[list[Vec3], Field(min_length=1)] | None = None
+    faces: Annotated[list[Face], Field(min_length=1)] | None = Field(
+        None, description="Indices into vertices, each below their count")
 
     @model_validator(mode="after")
     def _one_source(self):
@@ -186,31 +220,36 @@ class SceneInfo(BaseModel):
 
 
 class QueryOptions(Strict):
-    """How to query: as URL parameters for .npy bodies, in the body for JSON."""
+    """How to query: as URL parameters, or in a JSON body (where the body's win)."""
 
     query: QueryKind = Field("closest", description=(
         "closest: the nearest hit; any: whether anything is hit (occlusion); all: every hit "
         "along each ray, sorted by t; count: the number of hits"))
-    fields: list[SurfaceField] = Field(
-        [], description="Surface data of closest hits to return besides t and the ids")
+    fields: Annotated[list[SurfaceField], Field(max_length=3)] = Field(
+        [], description="Surface data of closest hits to return besides t and the ids (only "
+                        "with query=closest)")
     triangle_test: TriangleTest = "watertight"
 
 
-class NpyOptions(QueryOptions):
-    """URL parameters of .npy ray batches; ``tmin``/``tmax`` only for rays of shape (N, 6),
-    as (N, 8) rays carry their own."""
+class UrlOptions(QueryOptions):
+    """Query options as URL parameters, for either body.  A JSON body's own options win over
+    these, and so do the tmin and tmax columns of (N, 8) .npy rays."""
 
     tmin: float | None = Field(None, description="Default 0")
     tmax: float | None = Field(None, description="Default: no limit")
+
+    model_config = ConfigDict(strict=False)  # URL parameters are text: "0.5" is a number here
 
 
 class IntersectRequest(QueryOptions):
     """A batch of rays as JSON; a hit lies at ``origin + t * direction``."""
 
-    origins: list[Vec3]
-    directions: list[Vec3] = Field(description="Need not be unit length; t is in their units")
-    tmin: float | list[float] = 0.0
-    tmax: float | list[float | None] | None = Field(None, description="null: no limit")
+    origins: list[Vec3] = Field(description="As many as directions")
+    directions: list[Vec3] = Field(description="Need not be unit length (but not zero); t is "
+                                               "in their units")
+    tmin: float | list[float] = Field(0.0, description="One for all rays, or one per ray")
+    tmax: float | list[float | None] | None = Field(
+        None, description="One for all rays, or one per ray; null: no limit")
 
     model_config = ConfigDict(json_schema_extra={"examples": [{
         "origins": [[0, 1, -5], [0, 10, -5]], "directions": [[0, 0, 1], [0, 0, 1]],
@@ -226,9 +265,9 @@ class IntersectResponse(BaseModel):
     t: list[float | None] | None = None
     geom_id: list[int] | None = None
     prim_id: list[int] | None = None
-    uv: list[tuple[float, float] | None] | None = None
-    normal: list[Vec3 | None] | None = None
-    point: list[Vec3 | None] | None = None
+    uv: list[Annotated[list[float], Field(min_length=2, max_length=2)] | None] | None = None
+    normal: list[Point | None] | None = None
+    point: list[Point | None] | None = None
     occluded: list[bool] | None = None
     count: list[int] | None = None
     counts: list[int] | None = None
@@ -244,8 +283,8 @@ class IntersectResponse(BaseModel):
 
 class CameraBase(Strict):
     position: Vec3
-    look_at: Vec3
-    up: Vec3 = (0.0, 1.0, 0.0)
+    look_at: Vec3 = Field(description="Not equal to position")
+    up: Vec3 = Field((0.0, 1.0, 0.0), description="Not parallel to look_at - position")
     width: Annotated[int, Field(ge=1)] = 512
     height: Annotated[int, Field(ge=1)] = 512
 
@@ -257,7 +296,7 @@ class PerspectiveCamera(CameraBase):
 
 class OrthographicCamera(CameraBase):
     type: Literal["orthographic"]
-    view_height: Annotated[float, Field(gt=0, description="In scene units")]
+    view_height: Annotated[float, Field(gt=0, le=COORDINATE_LIMIT, description="In scene units")]
 
 
 class RenderRequest(Strict):
@@ -265,15 +304,40 @@ class RenderRequest(Strict):
 
     camera: Annotated[PerspectiveCamera | OrthographicCamera, Field(discriminator="type")]
     shading: Literal["depth", "normal", "lambert", "id"] = "lambert"
-    light_direction: Vec3 = Field((0.4, 1.0, 0.6), description="Towards the light (lambert)")
+    light_direction: Vec3 = Field((0.4, 1.0, 0.6),
+                                  description="Towards the light (lambert); not zero")
     ambient: Unit = 0.15
-    background: tuple[Byte, Byte, Byte] = Field((0, 0, 0), description="RGB of missed pixels")
+    background: Annotated[list[Byte], Field(min_length=3, max_length=3)] = Field(
+        (0, 0, 0), description="RGB of missed pixels")
     triangle_test: TriangleTest = "watertight"
 
     model_config = ConfigDict(json_schema_extra={"examples": [{
         "camera": {"type": "perspective", "position": [6, 4, -8], "look_at": [0, 1, 0],
                    "up": [0, 1, 0], "fov": 45, "width": 512, "height": 384},
         "shading": "lambert", "light_direction": [0.4, 1.0, 0.6]}]})
+
+
+# ---------------------------------------------------------------------- listings
+
+
+class Stored(BaseModel):
+    """One stored mesh or scene."""
+
+    id: str
+    bytes: int = Field(description="Memory it holds, as charged to the store's budget")
+    last_used: datetime = Field(description="When it was last stored, described or queried (UTC)")
+
+
+class Listing(BaseModel):
+    """A page of stored meshes or scenes, ordered by id (stable between pages)."""
+
+    items: list[Stored]
+    total: int = Field(description="How many there are in all")
+    next_offset: int | None = Field(description="offset of the next page; null on the last")
+
+    model_config = ConfigDict(json_schema_extra={"examples": [{
+        "items": [{"id": EXAMPLE_SCENE_ID, "bytes": 33568,
+                   "last_used": "2025-01-01T12:00:00Z"}], "total": 1, "next_offset": None}]})
 
 
 # ---------------------------------------------------------------------- health

@@ -7,6 +7,7 @@ every operation holds a lock; building what goes in happens outside it.
 
 import hashlib
 import threading
+import time
 from collections import OrderedDict
 
 from service.errors import LimitExceeded
@@ -38,6 +39,7 @@ class Store:
     def __init__(self, budget):
         self.budget = budget
         self._entries = OrderedDict()  # (kind, id) -> (value, nbytes, pinned), oldest first
+        self._used = {}  # (kind, id) -> time.time() of the last put or get
         self._aliases = {}  # (kind, name) -> id
         self._bytes = 0
         self._lock = threading.Lock()
@@ -55,6 +57,7 @@ class Store:
             if entry is None:
                 return None
             self._entries.move_to_end((kind, key))
+            self._used[(kind, key)] = time.time()
             return entry[0]
 
     def put(self, kind, key, value, nbytes, *, pinned=False):
@@ -72,6 +75,7 @@ class Store:
         with self._lock:
             if (kind, key) in self._entries:
                 self._entries.move_to_end((kind, key))
+                self._used[(kind, key)] = time.time()
                 return self._entries[(kind, key)][0], False
             pinned_bytes = sum(size for _, size, pin in self._entries.values() if pin)
             if nbytes > self.budget - pinned_bytes:
@@ -82,7 +86,9 @@ class Store:
                     break
                 if not self._entries[old][2]:
                     self._bytes -= self._entries.pop(old)[1]
+                    del self._used[old]
             self._entries[(kind, key)] = (value, nbytes, pinned)
+            self._used[(kind, key)] = time.time()
             self._bytes += nbytes
             return value, True
 
@@ -99,4 +105,14 @@ class Store:
             if entry is None:
                 return False
             self._bytes -= entry[1]
+            del self._used[(kind, key)]
             return True
+
+    def listing(self, kind):
+        """``(id, nbytes, last used as seconds since the epoch)`` of every ``kind`` entry, by id.
+
+        Reading the list does not count as using the entries.
+        """
+        with self._lock:
+            return sorted((key, entry[1], self._used[(k, key)])
+                          for (k, key), entry in self._entries.items() if k == kind)

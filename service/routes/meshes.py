@@ -1,66 +1,79 @@
-"""Mesh uploads: a file's raw bytes or a multipart form, parsed by trimesh, stored by content."""
+"""Mesh uploads: a file's raw bytes or a multipart form, parsed by trimesh, stored by content.
+
+Two routers: ``router`` (reading) is always open; ``guarded`` (uploads, deletions) changes the
+store, and the app includes it behind the API key when one is configured.
+"""
 
 from pathlib import PurePath
-from typing import Annotated
+from typing import Annotated, Literal
 
 from fastapi import APIRouter, Depends, Query, Request, Response
 
-from service.auth import require_api_key
 from service.builder import MESH_FORMATS, parse_mesh
 from service.errors import ClientError, UnsupportedMedia
+from service.listing import Limit, Offset, page
 from service.runtime import Runtime, runtime
-from service.schemas import MESH_LINKS, MeshInfo, error_responses
+from service.schemas import MESH_LINKS, Listing, MeshInfo, error_responses
 
 router = APIRouter(prefix="/v1/meshes", tags=["meshes"])
+guarded = APIRouter(prefix="/v1/meshes", tags=["meshes"])
 
-#: Content types that name a mesh format (the ``format`` parameter overrides them).
+#: Content types that name a mesh format (they win over the ``format`` parameter).
 MEDIA_TYPES = {"model/obj": "obj", "model/stl": "stl", "application/sla": "stl",
                "model/ply": "ply", "application/ply": "ply", "model/off": "off",
                "model/gltf-binary": "glb"}
 
 _TRIANGLE_OBJ = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"
+_BINARY = {"type": "string", "format": "binary"}
 _UPLOAD_BODY = {"content": {
-    **{media: {"schema": {"type": "string", "format": "binary"}, "example": _TRIANGLE_OBJ}
-       for media in ("model/obj", "application/octet-stream")},
-    **{media: {"schema": {"type": "string", "format": "binary"},
-               "example": "<the file's bytes>"}
-       for media in ("model/stl", "model/ply", "model/off", "model/gltf-binary")},
+    **{media: {"schema": _BINARY, "example": _TRIANGLE_OBJ} for media in ("model/obj",)},
+    **{media: {"schema": _BINARY, "example": "<the file's bytes>"}
+       for media in MEDIA_TYPES if media != "model/obj"},
     "multipart/form-data": {
-        "schema": {"type": "object", "required": ["file"],
-                   "properties": {"file": {"type": "string", "format": "binary"}}},
-        "example": {"file": "bunny.ply"}}},
-    "description": "The mesh file: its raw bytes (format from the format parameter or the "
-                   "Content-Type), or a multipart form whose 'file' part has a file name with "
-                   "the format's extension.", "required": True}
-_FORMAT_DOC = (f"File format, one of {', '.join(MESH_FORMATS)}; needed when the Content-Type "
-               "or the file name does not say")
+        "schema": {"type": "object", "required": ["file"], "additionalProperties": False,
+                   "properties": {"file": _BINARY}},
+        "encoding": {"file": {"contentType": ", ".join(MEDIA_TYPES)}},
+        "example": {"file": _TRIANGLE_OBJ}}},
+    "description": "The mesh file: its raw bytes, or a multipart form whose one part, 'file', "
+                   "holds it.  Its format is the first of: the Content-Type (of the part, in a "
+                   "form) where it names one, the part's file name extension, the format "
+                   "parameter (for bodies of other types, e.g. application/octet-stream).  The "
+                   "file must hold at least one triangle, every face must index its vertices, "
+                   "and vertices must be finite.", "required": True}
+_FORMAT_DOC = (f"File format, one of {', '.join(MESH_FORMATS)}, for a body whose Content-Type "
+               "(or form part) does not name one; a Content-Type or file name that names one wins")
 
 
 def _file_type(given, media_type, filename=None):
-    """The upload's format: the parameter, else the file name's extension, else the media type."""
+    """The upload's format: the media type's, else the file name extension's, else the
+    parameter's (see ``_UPLOAD_BODY``)."""
+    media_type = (media_type or "").split(";")[0].strip().lower()
+    if media_type in MEDIA_TYPES:
+        return MEDIA_TYPES[media_type]
+    extension = PurePath(filename).suffix[1:].lower() if filename else ""
+    if extension in MESH_FORMATS:
+        return extension
     if given is not None:
-        return given.lower()
-    if filename and PurePath(filename).suffix:
-        return PurePath(filename).suffix[1:].lower()
-    if MEDIA_TYPES.get(media_type) is None:
-        raise UnsupportedMedia(f"cannot tell the mesh format from Content-Type {media_type!r}: "
-                               f"add ?format= (one of {', '.join(MESH_FORMATS)})")
-    return MEDIA_TYPES[media_type]
+        return given
+    raise UnsupportedMedia(f"cannot tell the mesh format from Content-Type {media_type!r}"
+                           + (f" or file name {filename!r}" if filename else "")
+                           + f": add ?format= (one of {', '.join(MESH_FORMATS)})")
 
 
-@router.post("", status_code=201, response_model=MeshInfo, summary="Upload a mesh file",
-             openapi_extra={"requestBody": _UPLOAD_BODY}, dependencies=[Depends(require_api_key)],
-             responses={201: {"links": MESH_LINKS},
-                        200: {"model": MeshInfo, "description": "The same mesh was stored already",
-                              "links": MESH_LINKS},
-                        **error_responses(400, 401, 408, 413, 415, 422)})
+@guarded.post("", status_code=201, response_model=MeshInfo, summary="Upload a mesh file",
+              openapi_extra={"requestBody": _UPLOAD_BODY},
+              responses={201: {"links": MESH_LINKS},
+                         200: {"model": MeshInfo, "description": "The same mesh was stored "
+                                                                "already", "links": MESH_LINKS},
+                         **error_responses(400, 408, 413, 415, 422)})
 async def upload_mesh(request: Request, response: Response,
                       state: Annotated[Runtime, Depends(runtime)],
-                      file_format: Annotated[str | None, Query(alias="format",
-                                                               description=_FORMAT_DOC)] = None):
-    media_type = request.headers.get("content-type", "").split(";")[0].strip().lower()
-    if media_type == "multipart/form-data":
-        async with request.form(max_files=1, max_fields=1) as form:
+                      file_format: Annotated[Literal[MESH_FORMATS] | None,
+                                             Query(alias="format", description=_FORMAT_DOC)]
+                      = None):
+    media_type = request.headers.get("content-type", "")
+    if media_type.split(";")[0].strip().lower() == "multipart/form-data":
+        async with request.form(max_files=1, max_fields=0) as form:
             upload = form.get("file")
             if upload is None or isinstance(upload, str):
                 raise ClientError("the multipart form needs a 'file' part holding the mesh file")
@@ -76,13 +89,20 @@ async def upload_mesh(request: Request, response: Response,
     return entry.info
 
 
+@router.get("", response_model=Listing, summary="List the stored meshes",
+            responses=error_responses(422))
+async def list_meshes(state: Annotated[Runtime, Depends(runtime)], limit: Limit = 100,
+                      offset: Offset = 0):
+    return page(state.store, "mesh", limit, offset)
+
+
 @router.get("/{mesh_id}", response_model=MeshInfo, summary="Describe an uploaded mesh",
             responses=error_responses(404, 422))
 async def get_mesh(mesh_id: str, state: Annotated[Runtime, Depends(runtime)]):
     return (await state.get("mesh", mesh_id)).info
 
 
-@router.delete("/{mesh_id}", status_code=204, summary="Forget an uploaded mesh",
-               dependencies=[Depends(require_api_key)], responses=error_responses(401, 404, 422))
+@guarded.delete("/{mesh_id}", status_code=204, summary="Forget an uploaded mesh",
+                responses=error_responses(404, 422))
 async def delete_mesh(mesh_id: str, state: Annotated[Runtime, Depends(runtime)]):
     state.delete("mesh", mesh_id)

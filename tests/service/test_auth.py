@@ -69,8 +69,17 @@ def test_key_from_the_environment_is_not_shown():
         load_settings({"RAYCORE_API_KEY": "  "})
 
 
-def test_openapi_documents_the_key():
+def test_openapi_documents_no_key_when_none_is_configured():
     document = create_app(SETTINGS).openapi()
+    assert "securitySchemes" not in document["components"]
+    assert "API key" not in document["info"]["description"]
+    for item in document["paths"].values():
+        for operation in item.values():
+            assert "security" not in operation and "401" not in operation["responses"]
+
+
+def test_openapi_documents_the_key():
+    document = create_app(dataclasses.replace(SETTINGS, api_key=KEY)).openapi()
     schemes = document["components"]["securitySchemes"]
     assert schemes["APIKeyHeader"]["name"] == "X-API-Key"
     assert schemes["HTTPBearer"]["scheme"] == "bearer"

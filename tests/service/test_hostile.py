@@ -352,9 +352,10 @@ def test_over_the_ray_limit(hostile):
     count = SETTINGS.max_rays + 1
     refused(post_raw(client, f"{url}/intersect", npy(np.tile([0.0, 0, 0, 0, 0, 1], (count, 1))),
                      "application/x-npy"), 413, str(count), "rays")
+    # as JSON, the count is a maxItems of the document's schema: invalid (422), not too large
     refused(client.post(f"{url}/intersect", json={"origins": [[0, 0, 0]] * count,
                                                   "directions": [[0, 0, 1]] * count}),
-            413, "rays")
+            422, "rays")
 
 
 def test_over_the_byte_limit(hostile):
@@ -371,27 +372,35 @@ def test_over_the_triangle_limit(hostile):
     content, mesh = sphere_file("ply", subdivisions=5)
     assert len(mesh.faces) > SETTINGS.max_triangles
     refused(post_raw(client, "/v1/meshes?format=ply", content, "model/ply"), 413, "triangles")
+    # one mesh object over the limit breaks the document's maxItems (422); a scene whose
+    # objects are each within it but together over it is too large (413)
     count = SETTINGS.max_triangles + 1
-    spec = {"objects": [{"type": "mesh", "vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
-                         "faces": [[0, 1, 2]] * count}]}
-    refused(client.post("/v1/scenes", json=spec), 413, "triangles")
+    triangle = {"type": "mesh", "vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]]}
+    refused(client.post("/v1/scenes", json={"objects": [{**triangle,
+                                                         "faces": [[0, 1, 2]] * count}]}),
+            422, "triangles")
+    half = {**triangle, "faces": [[0, 1, 2]] * (count // 2 + 1)}
+    refused(client.post("/v1/scenes", json={"objects": [half, half]}), 413, "triangles")
 
 
 def test_over_the_pixel_limit(hostile):
     client, url, refused = hostile
-    for width, height in [(129, 128), (10**9, 10**9), (10**30, 1)]:
+    camera = {**RENDER["camera"], "width": 129, "height": 128}
+    refused(client.post(f"{url}/render", json={"camera": camera}), 413, "pixels")
+    # a side over the limit breaks the document's maximum: invalid (422)
+    for width, height in [(10**9, 10**9), (10**30, 1)]:
         camera = {**RENDER["camera"], "width": width, "height": height}
-        refused(client.post(f"{url}/render", json={"camera": camera}), 413, "pixels")
+        refused(client.post(f"{url}/render", json={"camera": camera}), 422, "width")
 
 
 def test_over_the_store_budget():
     """A scene bigger than the whole store is refused; many tiny scenes evict the oldest (each
     entry is charged for its Python objects, not only its arrays)."""
-    settings = Settings(**{**SETTINGS.__dict__, "store_bytes": 2 * 2**20})
+    settings = Settings(**{**SETTINGS.__dict__, "store_bytes": 2**20})
     with TestClient(create_app(settings)) as client:
-        mesh = trimesh.creation.icosphere(subdivisions=5)
+        mesh = trimesh.creation.icosphere(subdivisions=4)  # three within the triangle limit
         spec = {"objects": [{"type": "mesh", "vertices": mesh.vertices.tolist(),
-                             "faces": mesh.faces.tolist()}]}
+                             "faces": mesh.faces.tolist()}] * 3}
         response = client.post("/v1/scenes", json=spec)
         assert response.status_code == 413 and "store" in response.json()["detail"]
         ids = []
