@@ -71,11 +71,11 @@ class Trimesh:
         from trimesh.ray.ray_triangle import RayMeshIntersector
 
         self._mesh = trimesh.Trimesh(vertices, faces, process=False)
-        self._intersector = RayMeshIntersector(self._mesh)
+        self.intersector = RayMeshIntersector(self._mesh)
         self.closest(np.zeros((1, 3)), np.array([[1.0, 0, 0]]))
 
     def closest(self, origins, directions):
-        index_tri, index_ray, locations = self._intersector.intersects_id(
+        index_tri, index_ray, locations = self.intersector.intersects_id(
             origins, directions, multiple_hits=False, return_locations=True)
         locations = np.asarray(locations).reshape(-1, 3)  # (0,) when nothing is hit
         t = np.full(len(origins), np.inf)
