@@ -13,10 +13,11 @@ not:
   (:meth:`raycore.Scene.intersect_all`): each is reported once, and a crossing through a shared
   edge or vertex once, not once per face (trimesh's NumPy intersector reports it per face,
   trimesh #2317).
-- **Misses on shared edges and vertices** (trimesh #1766, #1496).  Embree's and trimesh's
-  triangle tests are not watertight: a ray through an edge or vertex shared by several faces can
-  miss all of them.  raycore's default triangle test (Woop, Benthin and Wald 2013) with
-  conservative box tests never lets such a ray through.
+- **Misses on shared edges and vertices** (trimesh #1766, #1496).  Those reports, made with
+  pyembree's Embree 2, show rays through an edge or vertex shared by several faces missing all
+  of them (embreex's Embree 4 did not miss any of the edge- and vertex-aimed rays of this
+  module's tests).  raycore's default triangle test (Woop, Benthin and Wald 2013) with
+  conservative box tests never lets such a ray through, in either precision.
 - **Precision at large coordinates** (trimesh #48, #1919).  Embree runs in float32 on
   coordinates scaled to a box of 100; hit points far from the origin lose digits.  This
   intersector runs in float64 by default (``dtype="float32"`` trades that for speed), and with
