@@ -16,6 +16,8 @@ $(BIN)/python:
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 $(VENV)/.dev-installed: pyproject.toml | $(BIN)/python
+	@# Open3D (tests/integrations/test_open3d.py) links against the system's libusb-1.0.
+	@ldconfig -p | grep -q libusb-1.0 || (apt-get update -qq && apt-get install -y -qq libusb-1.0-0)
 	$(BIN)/python -m pip install --quiet -e ".[service,oracle,dev]"
 	touch $@
 

@@ -17,6 +17,7 @@ from raycore.bvh.record import SceneRecord
 from raycore.bvh.simd import BLOCK
 from raycore.bvh.traverse import MESH
 from raycore.hits import SURFACE_FIELDS, AllHits, Hits
+from raycore.integrations import open3d as _open3d
 from raycore.mesh import Mesh, affine_inverse, affine_product, validate_transform
 from raycore.primitives import analytic, box, cone, cylinder, disk, plane, sphere
 from raycore.primitives.triangle import WATERTIGHT, triangle_test_code
@@ -377,6 +378,11 @@ class Scene:
         return votes >= 2
 
     # ------------------------------------------------------------------ interop
+
+    # Open3D's RaycastingScene calls, as thin adapters (raycore.integrations.open3d)
+    cast_rays, count_intersections = _open3d.cast_rays, _open3d.count_intersections
+    list_intersections, test_occlusions = _open3d.list_intersections, _open3d.test_occlusions
+    create_rays_pinhole = staticmethod(_open3d.create_rays_pinhole)
 
     @classmethod
     def from_trimesh(cls, mesh_or_scene, dtype="float32", **build):
