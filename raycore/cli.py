@@ -70,8 +70,8 @@ def _warmup(args):
     print(f"raycore warmup: done in {seconds:.1f} s")
 
 
-def main(argv=None):
-    """Parse ``argv`` (default: the command line) and run the subcommand."""
+def build_parser():
+    """The ``raycore`` command's parser, with every subcommand."""
     parser = _Parser(prog="raycore", description="Ray casting library and service")
     commands = parser.add_subparsers(dest="command", required=True)
     serve = commands.add_parser(
@@ -98,13 +98,19 @@ def main(argv=None):
     warmup.set_defaults(run=_warmup)
     for command in (render, cast, bench):
         command.add_parser(commands)
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv=None):
+    """Parse ``argv`` (default: the command line) and run the subcommand."""
+    args = build_parser().parse_args(argv)
     try:
         args.run(args)
     except Exception as error:  # noqa: BLE001 - the user sees one line, whatever failed
         sys.exit(_one_line(args.command, error))
     except KeyboardInterrupt:
-        sys.exit(f"raycore {args.command}: interrupted")
+        print(f"raycore {args.command}: interrupted", file=sys.stderr)
+        sys.exit(130)  # the shell's status for a command ended by SIGINT
 
 
 def _one_line(command, error):

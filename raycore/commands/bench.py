@@ -66,12 +66,12 @@ def _benchmark_module():
     is none or the ``bench`` extra is missing."""
     root = Path(__file__).resolve().parents[2]
     if not (root / "benchmarks" / "run.py").is_file():
-        raise CommandError("raycore bench runs benchmarks/run.py from a source checkout of "
-                           "raycore (pip install -e '.[bench]' there); this installation has "
-                           "none")
+        raise CommandError("the benchmark (benchmarks/run.py) comes with a source checkout of "
+                           "raycore, not with the package: run it there, after pip install -e "
+                           "'.[service,bench]'")
     missing = [name for name in NEEDS if importlib.util.find_spec(name) is None]
     if missing:
-        raise CommandError(f"raycore bench needs the bench extra ({', '.join(missing)} "
+        raise CommandError(f"the benchmark needs the bench extra ({', '.join(missing)} "
                            "missing): pip install -e '.[service,bench]' (or make bench)")
     # the benchmark runs part of itself in a subprocess (python -m benchmarks.run), which must
     # find the checkout too, whatever the working directory
