@@ -36,6 +36,7 @@ full run takes about 15 minutes on 2 cores.
 """
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -332,7 +333,8 @@ def machine():
             "embreex": getattr(embreex, "__version__", "unknown")}
 
 
-def main(argv=None):
+def parser():
+    """The benchmark's command line options (``raycore bench`` offers the same ones)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true",
                         help=f"one small mesh ({meshes.QUICK_MESH}), few rays: a smoke run")
@@ -344,7 +346,25 @@ def main(argv=None):
     parser.add_argument("--out", type=Path, help="folder for bench.json and bench.md (default: "
                         "benchmarks/results/; with --quick, a temporary folder)")
     parser.add_argument("--one-thread-output", type=Path, help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
+    return parser
+
+
+def _no_progress(description, total=None):
+    return contextlib.nullcontext(lambda amount=1: None)
+
+
+def main(argv=None, progress=_no_progress):
+    """Run the benchmark.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Options (see :func:`parser`); the command line's by default.
+    progress : callable, optional
+        ``progress(description, total)``, a context manager that yields ``advance(amount)``
+        (``raycore bench`` passes its progress bar's stages).
+    """
+    args = parser().parse_args(argv)
     start, load_at_start = time.perf_counter(), os.getloadavg()[0]
     names = args.meshes or meshes.benchmark_meshes(args.quick, large=not args.no_large)
 
@@ -356,12 +376,16 @@ def main(argv=None):
             {"numba_threads": numba.get_num_threads(), "meshes": results}))
         return
 
-    first = first_builds()
+    with progress("first builds"):
+        first = first_builds()
     results = []
-    for name in names:
-        results.append(bench_mesh(name, args.quick, args.rounds))
-        print(report.mesh_summary(results[-1]), flush=True)
-    one_thread = one_thread_run(names, args.quick, args.rounds)
+    with progress("meshes", total=len(names)) as advance:
+        for name in names:
+            results.append(bench_mesh(name, args.quick, args.rounds))
+            print(report.mesh_summary(results[-1]), flush=True)
+            advance()
+    with progress("one thread, in a subprocess"):
+        one_thread = one_thread_run(names, args.quick, args.rounds)
     document = {"machine": machine(), "first_build_seconds": first, "rounds": args.rounds,
                 "meshes": results, "one_thread": one_thread,
                 "duration_seconds": time.perf_counter() - start,

@@ -134,3 +134,81 @@ def orthographic_rays(position, look_at, up, view_height, width, height, dtype="
     rise = y * view_height / 2
     dtype = resolve_dtype(dtype)
     return _plane_rays(position, right, true_up, across, rise, forward, dtype)
+
+
+#: Where the framing camera looks from, seen from the scene's centre: in front (+z), to the right
+#: (+x) and above (+y), the three-quarter view in which y-up models (OBJ's convention) are
+#: usually shown; the default light (:data:`raycore.render.DEFAULT_LIGHT`) falls on that side.
+THREE_QUARTER = (1.0, 0.75, 1.6)
+
+
+def frame_box(lo, hi, width, height, *, fov=45.0, position=None, look_at=None,
+              up=(0.0, 1.0, 0.0), fill=0.9):
+    """A camera that sees the whole box ``lo``..``hi``, for what a caller leaves out.
+
+    ``look_at`` defaults to the box's centre; ``position`` to a point in the
+    :data:`THREE_QUARTER` direction from ``look_at``, as near as lets a perspective camera of
+    vertical field of view ``fov`` see every corner of the box; the returned view height frames
+    the box for an orthographic camera at the final position.
+
+    Parameters
+    ----------
+    lo, hi : array_like, shape (3,)
+        The box; an empty one (some ``lo`` above its ``hi``, e.g. a scene of planes only) is
+        taken as the cube from -1 to 1.
+    width, height : int
+        Image size in pixels (its aspect ratio).
+    fov : float
+        Vertical field of view in degrees, in (0, 180).
+    position, look_at : array_like, shape (3,), optional
+    up : array_like, shape (3,)
+    fill : float
+        Fraction of the half image, in (0, 1], that the box's farthest corner reaches.
+
+    Returns
+    -------
+    position, look_at : ndarray of float64, shape (3,)
+    view_height : float
+        For :func:`orthographic_rays` from ``position`` towards ``look_at``.
+
+    Raises
+    ------
+    ValueError
+        Naming the argument that is out of range or degenerate.
+    """
+    if not 0 < fov < 180:
+        raise ValueError(f"fov must be in (0, 180) degrees, got {fov!r}")
+    if not 0 < fill <= 1:
+        raise ValueError(f"fill must be in (0, 1], got {fill!r}")
+    _pixel_grid(width, height)  # checks them
+    lo = as_float_array(lo, "lo", np.float64, (3,))
+    hi = as_float_array(hi, "hi", np.float64, (3,))
+    if np.any(lo > hi):
+        lo, hi = np.full(3, -1.0), np.full(3, 1.0)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])])
+    look_at = (lo + hi) / 2 if look_at is None else as_float_array(look_at, "look_at",
+                                                                   np.float64, (3,))
+    # half the image's extent at distance 1, vertically and horizontally, shrunk by fill
+    tan_v = np.tan(np.radians(fov) / 2) * fill
+    tan_h = tan_v * width / height
+    if position is None:
+        toward = np.asarray(THREE_QUARTER) / np.linalg.norm(THREE_QUARTER)
+        _, right, true_up, forward = _frame(look_at + toward, look_at, up)
+        relative = corners - look_at
+        # a corner at depth (distance - its offset towards the camera) is in view once its
+        # sideways offsets fit within the view's half extents at that depth
+        depth_offset = relative @ toward
+        needed = depth_offset + np.maximum(np.abs(relative @ right) / tan_h,
+                                           np.abs(relative @ true_up) / tan_v)
+        size = max(float(np.linalg.norm(hi - lo)), 1e-12)
+        # in front of every corner, also for a flat box seen edge-on
+        distance = max(needed.max(), depth_offset.max() + 1e-3 * size, 1e-3 * size)
+        position = look_at + distance * toward
+    else:
+        position = as_float_array(position, "position", np.float64, (3,))
+    position, right, true_up, forward = _frame(position, look_at, up)
+    relative = corners - position
+    half = max(np.abs(relative @ true_up).max(),
+               np.abs(relative @ right).max() * height / width) / fill
+    return position, look_at, float(max(2 * half, 1e-12))

@@ -1,18 +1,36 @@
 """The ``raycore`` command: ``raycore serve`` runs the HTTP service, ``raycore openapi`` writes
 its OpenAPI document, ``raycore info`` says what the library runs on, ``raycore warmup``
-compiles its kernels ahead of use."""
+compiles its kernels ahead of use; ``render``, ``cast`` and ``bench`` (:mod:`raycore.commands`)
+work on files.
+
+Whatever a user gets wrong (options, files, their contents) is answered with one line on stderr
+and exit status 1 (2 for the command line's own syntax), never a traceback.
+"""
 
 import argparse
 import json
+import os
 import sys
+
+from raycore.commands import bench, cast, positive_int, render, user_error
+
+#: Set to 1 to let unexpected errors through with their traceback (they are bugs: report them).
+TRACEBACK_VARIABLE = "RAYCORE_TRACEBACK"
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser whose errors are one line (argparse prints the usage before them)."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def _serve(args):
     import uvicorn
 
-    from service.app import create_app
-
-    uvicorn.run(create_app(), host=args.host, port=args.port, log_level=args.log_level)
+    # worker processes import the app by name and make their own; one process can take the app
+    uvicorn.run("service.app:create_app", factory=True, host=args.host, port=args.port,
+                log_level=args.log_level, workers=args.workers)
 
 
 def _openapi(args):
@@ -52,9 +70,9 @@ def _warmup(args):
     print(f"raycore warmup: done in {seconds:.1f} s")
 
 
-def main(argv=None):
-    """Parse ``argv`` (default: the command line) and run the subcommand."""
-    parser = argparse.ArgumentParser(prog="raycore", description="Ray casting library and service")
+def build_parser():
+    """The ``raycore`` command's parser, with every subcommand."""
+    parser = _Parser(prog="raycore", description="Ray casting library and service")
     commands = parser.add_subparsers(dest="command", required=True)
     serve = commands.add_parser(
         "serve", help="serve the HTTP API (settings from RAYCORE_* environment variables)")
@@ -62,6 +80,9 @@ def main(argv=None):
     serve.add_argument("--port", type=int, default=8000)
     serve.add_argument("--log-level", default="info",
                        choices=["critical", "error", "warning", "info", "debug"])
+    serve.add_argument("--workers", type=positive_int,
+                       help="worker processes, each with its own store (default: 1, or "
+                            "$WEB_CONCURRENCY); see the README's 'Scaling to several workers'")
     serve.set_defaults(run=_serve)
     openapi = commands.add_parser("openapi", help="write the HTTP API's OpenAPI document")
     openapi.add_argument("--output", default="-", help="file to write, or - for stdout")
@@ -75,8 +96,33 @@ def main(argv=None):
     warmup.add_argument("--dtype", default="both", choices=["float32", "float64", "both"],
                         help="precision of the scenes to compile for (default: both)")
     warmup.set_defaults(run=_warmup)
-    args = parser.parse_args(argv)
-    args.run(args)
+    for command in (render, cast, bench):
+        command.add_parser(commands)
+    return parser
+
+
+def main(argv=None):
+    """Parse ``argv`` (default: the command line) and run the subcommand."""
+    args = build_parser().parse_args(argv)
+    try:
+        args.run(args)
+    except Exception as error:  # noqa: BLE001 - the user sees one line, whatever failed
+        sys.exit(_one_line(args.command, error))
+    except KeyboardInterrupt:
+        print(f"raycore {args.command}: interrupted", file=sys.stderr)
+        sys.exit(130)  # the shell's status for a command ended by SIGINT
+
+
+def _one_line(command, error):
+    """The line that ``error`` is reported with (re-raised when it is a bug and
+    :data:`TRACEBACK_VARIABLE` asks for its traceback)."""
+    message = user_error(error)
+    if message is None:
+        if os.environ.get(TRACEBACK_VARIABLE) == "1":
+            raise error
+        message = (f"unexpected {type(error).__name__}: {error} (a bug: "
+                   f"{TRACEBACK_VARIABLE}=1 shows where)")
+    return f"raycore {command}: {' '.join(str(message).split())}"
 
 
 if __name__ == "__main__":

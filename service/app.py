@@ -19,7 +19,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from service.auth import require_api_key
 from service.config import Settings, load_settings
 from service.demo import load_demo
-from service.errors import ClientError
+from service.errors import ClientError, validation_detail
 from service.methods import Methods
 from service.openapi import document
 from service.routes import health, meshes, scenes
@@ -212,11 +212,8 @@ async def _invalid_request(request, error):
     # without the offending input: it can be huge, or NaN, which JSON cannot carry
     problems = [{"loc": list(problem["loc"]), "msg": problem["msg"], "type": problem["type"]}
                 for problem in error.errors()]
-    detail = "; ".join(".".join(map(str, problem["loc"])) + ": " + problem["msg"]
-                       for problem in problems[:3])
-    if len(problems) > 3:
-        detail += f" (and {len(problems) - 3} more)"
-    return JSONResponse({"detail": detail, "errors": problems[:100]}, status_code=422)
+    return JSONResponse({"detail": validation_detail(problems), "errors": problems[:100]},
+                        status_code=422)
 
 
 async def _unexpected(request, error):

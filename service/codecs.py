@@ -155,7 +155,7 @@ def rays_from_json(request):
 
 
 def result_columns(query, result):
-    """Named columns of a query's result (see :func:`service.routes.scenes.run_query`)."""
+    """Named columns of a query's result (see :func:`service.answers.run_query`)."""
     if query == "any":
         return {"occluded": result}
     if query == "count":

@@ -33,3 +33,18 @@ class UnsupportedMedia(ClientError):
     """The body's content type is not one the endpoint reads (415)."""
 
     status = 415
+
+
+def validation_detail(problems, shown=3):
+    """One line naming the first ``shown`` problems of a pydantic validation, ``loc: msg`` each.
+
+    Parameters
+    ----------
+    problems : list of dict
+        ``ValidationError.errors()``, or its items' ``loc`` and ``msg``.
+    """
+    detail = "; ".join(".".join(map(str, problem["loc"])) + ": " + problem["msg"]
+                       for problem in problems[:shown])
+    if len(problems) > shown:
+        detail += f" (and {len(problems) - shown} more)"
+    return detail

@@ -81,3 +81,54 @@ def test_float32_rays_are_the_float64_rays_rounded(make):
 def test_bad_dtype():
     with pytest.raises(ValueError, match="dtype"):
         perspective_rays(**VIEW, fov=50.0, width=4, height=4, dtype="float16")
+
+
+# ---------------------------------------------------------------------- frame_box
+
+def _view(position, look_at, up, corners):
+    """Camera-space (right, up, depth) of points, from the camera's own axes."""
+    forward = np.subtract(look_at, position)
+    forward = forward / np.linalg.norm(forward)
+    right = np.cross(forward, up)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, forward)
+    relative = corners - position
+    return relative @ right, relative @ true_up, relative @ forward
+
+
+def _corners(lo, hi):
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                     for z in (lo[2], hi[2])], dtype=float)
+
+
+@pytest.mark.parametrize("width, height, fov", [(512, 512, 45.0), (640, 360, 30.0),
+                                                (200, 400, 90.0)])
+def test_frame_box_sees_every_corner_and_fills_the_view(width, height, fov):
+    from raycore.camera import THREE_QUARTER, frame_box
+
+    lo, hi = np.array([-3.0, 0.5, 10.0]), np.array([1.0, 2.0, 11.0])
+    position, look_at, view_height = frame_box(lo, hi, width, height, fov=fov, fill=0.9)
+    np.testing.assert_allclose(look_at, (lo + hi) / 2)
+    toward = (position - look_at) / np.linalg.norm(position - look_at)
+    np.testing.assert_allclose(toward, np.divide(THREE_QUARTER, np.linalg.norm(THREE_QUARTER)))
+    x, y, depth = _view(position, look_at, (0, 1, 0), _corners(lo, hi))
+    assert np.all(depth > 0)
+    tan_v = np.tan(np.radians(fov) / 2)
+    # the farthest-reaching corner is at 0.9 of the half view: inside, and as near as allowed
+    reach = np.maximum(np.abs(x) / (tan_v * width / height), np.abs(y) / tan_v) / depth
+    assert reach.max() == pytest.approx(0.9, rel=1e-9)
+    # orthographic: every corner within the view height and the width that goes with it
+    half = np.maximum(np.abs(y), np.abs(x) * height / width)
+    assert half.max() == pytest.approx(0.9 * view_height / 2, rel=1e-9)
+
+
+def test_frame_box_keeps_a_given_camera_and_takes_an_empty_box_as_a_cube():
+    from raycore.camera import frame_box
+
+    position, look_at, view_height = frame_box([1, 1, 1], [-1, -1, -1], 100, 100,
+                                               position=[0, 0, 10], look_at=[0, 0, 0])
+    np.testing.assert_array_equal(position, [0, 0, 10])
+    np.testing.assert_array_equal(look_at, [0, 0, 0])
+    assert view_height == pytest.approx(2 / 0.9)  # the cube -1..1 seen face-on
+    with pytest.raises(ValueError, match="fov"):
+        frame_box([0, 0, 0], [1, 1, 1], 10, 10, fov=180)

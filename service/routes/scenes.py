@@ -6,14 +6,12 @@ deletions) changes the store, and the app includes it behind the API key when on
 
 from typing import Annotated
 
-import numpy as np
 from fastapi import APIRouter, Depends, Query, Request, Response
 from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 
-from raycore.camera import orthographic_rays, perspective_rays
-from raycore.render import render
 from service import codecs
+from service.answers import render_image, run_query
 from service.bodies import read_body
 from service.builder import build_scene, scene_id
 from service.demo import DEMO_CAMERA
@@ -164,33 +162,6 @@ def _with_url_options(request, options, in_url):
                                       for name in in_url - request.model_fields_set})
 
 
-def run_query(scene, rays, options):
-    """Answer ``options.query`` for ``rays`` (origins, directions, tmin, tmax) with ``scene``.
-
-    Returns
-    -------
-    Hits (closest), AllHits (all), (N,) bool (any) or (N,) int64 (count)
-
-    Raises
-    ------
-    ClientError
-        With the library's message for rays it refuses.
-    """
-    if options.fields and options.query != "closest":
-        raise ClientError(f"fields apply to closest-hit queries, not query={options.query}")
-    test = options.triangle_test
-    try:
-        if options.query == "closest":
-            return scene.intersect(*rays, triangle_test=test, fields=options.fields)
-        if options.query == "any":
-            return scene.occluded(*rays, triangle_test=test)
-        if options.query == "all":
-            return scene.intersect_all(*rays, triangle_test=test)
-        return scene.count(*rays, triangle_test=test)
-    except ValueError as error:
-        raise ClientError(str(error)) from error
-
-
 _RENDER = (
     "Rules that the schema does not state: width x height is at most the configured pixel "
     "limit (413); look_at differs from position, up is not parallel to the view direction, and "
@@ -218,19 +189,6 @@ async def render_scene(scene_id: str, spec: RenderRequest, state: State):
                             f"{limit}")
 
     def draw():
-        view = (camera.position, camera.look_at, camera.up)
-        try:
-            size = (camera.width, camera.height, entry.scene.dtype)
-            if camera.type == "perspective":
-                rays = perspective_rays(*view, camera.fov, *size)
-            else:
-                rays = orthographic_rays(*view, camera.view_height, *size)
-            image = render(entry.scene, *rays, camera.width, camera.height, spec.shading,
-                           light_direction=spec.light_direction, colors=entry.colors,
-                           background=np.asarray(spec.background), ambient=spec.ambient,
-                           triangle_test=spec.triangle_test)
-        except ValueError as error:
-            raise ClientError(str(error)) from error
-        return codecs.png(image)
+        return codecs.png(render_image(entry.scene, entry.colors, spec))
 
     return Response(await state.compute(draw), media_type="image/png")
