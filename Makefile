@@ -41,6 +41,7 @@ PYTHON313 ?= $(or $(shell python3.13 -c 'import sys; print(sys.executable)' 2>/d
 	$(lastword $(sort $(wildcard $(shell pyenv root 2>/dev/null)/versions/3.13*/bin/python3.13))))
 PY313_TESTS ?= tests/scene tests/bvh tests/service tests/test_camera.py tests/test_offset.py \
 	tests/test_render.py tests/test_threading.py tests/test_info.py tests/test_compile_notice.py tests/test_warmup.py \
+	tests/test_ray_bounds.py tests/commands tests/integrations/test_trimesh.py \
 	--ignore tests/service/test_schemathesis.py --ignore tests/service/test_fuzz.py
 test-py313:
 	@test -n "$(PYTHON313)" || (echo "test-py313 needs Python 3.13 (python3.13, or pyenv's)"; exit 2)
