@@ -31,25 +31,30 @@ from raycore.bvh.traverse import (
 from raycore.primitives.analytic import analytic_surface
 from raycore.primitives.triangle import triangle_normal
 
-#: Rays per parallel work item: enough to amortise a call's set-up, few enough to balance cores.
+#: Rays per parallel work item: enough to amortise a call's set-up, few enough to balance cores;
+#: a batch of fewer than 4 * CHUNK rays per thread is cut into smaller items, down to MIN_CHUNK,
+#: so that every core gets some of it.
 CHUNK = 1024
+MIN_CHUNK = 64
 
 #: Batches smaller than this are traced on the calling thread: starting a parallel region costs
-#: more than the rays it would share out.
-SERIAL_BELOW = 1024
+#: more than the rays it would share out.  Measured on nefertiti's random rays, 2 cores, with
+#: work items cut down to MIN_CHUNK rays: 256 rays took 34-35 us on one thread and 31-37 on two;
+#: 512 rays 64-65 and 49-52 us; 1024 rays 125-127 and 79-94 us (142 as one item of CHUNK rays).
+SERIAL_BELOW = 512
 
 
 @njit(cache=True, parallel=True, _nrt=False)
 def _trace_parallel(scene, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
                     out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t,
-                    hits_obj, hits_prim, int_scratch, real_scratch, capacity, first_bad):
+                    hits_obj, hits_prim, int_scratch, real_scratch, capacity, size, first_bad):
     # first_bad[chunk]: the chunk's first refused ray (a reduction would allocate)
     n = len(origins)
     for chunk in prange(len(first_bad)):
         thread = get_thread_id()
         first_bad[chunk] = trace_range(
-            scene, mode, test, sphere_method, origins, directions, tmin, tmax, chunk * CHUNK,
-            min(n, (chunk + 1) * CHUNK), out_t, out_obj, out_prim, out_hit, out_u, out_v,
+            scene, mode, test, sphere_method, origins, directions, tmin, tmax, chunk * size,
+            min(n, (chunk + 1) * size), out_t, out_obj, out_prim, out_hit, out_u, out_v,
             out_slot, offsets, hits_t, hits_obj, hits_prim, int_scratch[thread],
             real_scratch[thread], capacity)
 
@@ -57,11 +62,12 @@ def _trace_parallel(scene, mode, test, sphere_method, origins, directions, tmin,
 @njit(cache=True)
 def _trace_in_parallel(record, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
                        out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t,
-                       hits_obj, hits_prim, int_scratch, real_scratch, capacity):
-    first_bad = np.empty((len(origins) + CHUNK - 1) // CHUNK, np.int64)
+                       hits_obj, hits_prim, int_scratch, real_scratch, capacity, size):
+    first_bad = np.empty((len(origins) + size - 1) // size, np.int64)
     _trace_parallel(arrays_of(record), mode, test, sphere_method, origins, directions, tmin,
                     tmax, out_t, out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets,
-                    hits_t, hits_obj, hits_prim, int_scratch, real_scratch, capacity, first_bad)
+                    hits_t, hits_obj, hits_prim, int_scratch, real_scratch, capacity, size,
+                    first_bad)
     return first_bad.min()
 
 
@@ -126,18 +132,19 @@ def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, o
     out_hit = _NO_FLAGS if out_hit is None else out_hit
     u, v, slot = (empty, empty, _NO_INTS) if barycentrics is None else barycentrics
     hits_t, hits_obj, hits_prim = (empty, _NO_INTS, _NO_INTS) if hits is None else hits
-    serial = len(origins) < SERIAL_BELOW
-    int_scratch, real_scratch = _scratch.get(origins.dtype, capacity,
-                                             1 if serial else get_num_threads())
+    threads = get_num_threads()
+    serial = len(origins) < SERIAL_BELOW or threads == 1
+    int_scratch, real_scratch = _scratch.get(origins.dtype, capacity, 1 if serial else threads)
     arguments = (scene, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
                  out_obj, out_prim, out_hit, u, v, slot, offsets, hits_t, hits_obj, hits_prim,
                  int_scratch, real_scratch, capacity)
     if serial:
         return _trace_here(*arguments)
-    # one chunk of CHUNK rays per scheduling step: rays cost very different amounts (a miss is
-    # ten times cheaper than a hit), and static halves would leave one core idle
+    # one chunk per scheduling step: rays cost very different amounts (a miss is ten times
+    # cheaper than a hit), and static halves would leave one core idle
+    size = min(CHUNK, max(MIN_CHUNK, len(origins) // (4 * threads)))
     with parallel_chunksize(1):
-        return _trace_in_parallel(*arguments)
+        return _trace_in_parallel(*arguments, size)
 
 
 def closest_hits(scene, rays, test, sphere_method, barycentrics):
