@@ -31,11 +31,12 @@ from raycore.bvh.traverse import (
 from raycore.primitives.analytic import analytic_surface
 from raycore.primitives.triangle import triangle_normal
 
-#: Rays per parallel work item: enough to amortise a call's set-up, few enough to balance cores;
-#: a batch of fewer than 4 * CHUNK rays per thread is cut into smaller items, down to MIN_CHUNK,
-#: so that every core gets some of it.
+#: Rays per parallel work item: enough to amortise a call's set-up, few enough to balance cores.
+#: A batch of fewer than ITEMS_PER_THREAD * CHUNK rays per thread is cut into smaller items, down
+#: to MIN_CHUNK, so that every core gets some of it (2, 4 or 8 items per thread timed alike).
 CHUNK = 1024
 MIN_CHUNK = 64
+ITEMS_PER_THREAD = 2
 
 #: Batches smaller than this are traced on the calling thread: starting a parallel region costs
 #: more than the rays it would share out.  Measured on nefertiti's random rays, 2 cores, with
@@ -132,9 +133,10 @@ def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, o
     out_hit = _NO_FLAGS if out_hit is None else out_hit
     u, v, slot = (empty, empty, _NO_INTS) if barycentrics is None else barycentrics
     hits_t, hits_obj, hits_prim = (empty, _NO_INTS, _NO_INTS) if hits is None else hits
-    threads = get_num_threads()
-    serial = len(origins) < SERIAL_BELOW or threads == 1
-    int_scratch, real_scratch = _scratch.get(origins.dtype, capacity, 1 if serial else threads)
+    serial = len(origins) < SERIAL_BELOW
+    # get_num_threads costs 0.8 us: asked only for a parallel call
+    threads = 1 if serial else get_num_threads()
+    int_scratch, real_scratch = _scratch.get(origins.dtype, capacity, threads)
     arguments = (scene, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
                  out_obj, out_prim, out_hit, u, v, slot, offsets, hits_t, hits_obj, hits_prim,
                  int_scratch, real_scratch, capacity)
@@ -142,7 +144,7 @@ def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, o
         return _trace_here(*arguments)
     # one chunk per scheduling step: rays cost very different amounts (a miss is ten times
     # cheaper than a hit), and static halves would leave one core idle
-    size = min(CHUNK, max(MIN_CHUNK, len(origins) // (4 * threads)))
+    size = min(CHUNK, max(MIN_CHUNK, len(origins) // (ITEMS_PER_THREAD * threads)))
     with parallel_chunksize(1):
         return _trace_in_parallel(*arguments, size)
 
