@@ -44,7 +44,7 @@ class Scene:
         SAH build parameters of the meshes' trees (see :class:`raycore.bvh.build.BuildParams`).
         A mesh's leaf triangles are tested four at a time, and the SAH prices a leaf by the
         blocks of four it fills (as Embree's builder does): leaves of up to 8 at a cost of 1.0
-        a block made trees of 56-58 B per triangle (73 B when pricing each triangle at 0.4)
+        a block made trees of 57-60 B per triangle (73 B when pricing each triangle at 0.4)
         that traced random rays 4-8 % faster (stanford-bunny, one thread).  The
         top-level tree over objects, each tested on its own, keeps the default costs, with
         ``bins``.
