@@ -193,12 +193,8 @@ def ray_arrays(origins, directions, tmin, tmax, dtype):
             and origins.shape == directions.shape):
         origins, directions, _ = _contiguous_rays(origins, directions, dtype)
     count = len(origins)
-    tmin, tmax = _as_bound(tmin, "tmin", count, dtype), _as_bound(tmax, "tmax", count, dtype)
-    if len(tmin) != len(tmax):
-        # the kernels index both bounds with one stride, taken from tmin: a scalar beside an
-        # (N,) array would be read past its end
-        tmin, tmax = (np.broadcast_to(bound, (count,)).copy() for bound in (tmin, tmax))
-    return origins, directions, tmin, tmax
+    return (origins, directions, _as_bound(tmin, "tmin", count, dtype),
+            _as_bound(tmax, "tmax", count, dtype))
 
 
 def _ready(array, dtype):

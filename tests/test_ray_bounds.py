@@ -1,7 +1,8 @@
 """Regression: a per-ray bound beside a scalar one (found by raycore.integrations.trimesh).
 
-The kernels index tmin and tmax with one stride, taken from tmin; an (N,) tmin with the default
-scalar tmax read tmax past its end, and rays came back refused or missed at random.
+The kernels indexed tmin and tmax with one stride, taken from tmin; an (N,) tmin with the default
+scalar tmax read tmax past its end, and rays came back refused or missed at random.  Each bound
+now has its own stride.
 """
 
 import numpy as np

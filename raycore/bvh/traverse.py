@@ -462,16 +462,14 @@ def _face_id(scene, obj, prim):
 
 
 @njit(cache=True, inline="always")
-def _bad_ray(origins, directions, tmin, tmax, i, step):
-    """Whether ray ``i`` is one the library refuses: a non-finite coordinate, a zero direction,
-    or a NaN bound (the caller finds out which and says so)."""
+def _bad_ray(origins, directions, i, lo, hi):
+    """Whether ray ``i``, with bounds ``lo``, ``hi``, is one the library refuses: a non-finite
+    coordinate, a zero direction, or a NaN bound (the caller finds out which and says so)."""
     fine = True
     nonzero = False
     for a in range(3):
         fine &= np.isfinite(origins[i, a]) and np.isfinite(directions[i, a])
         nonzero |= directions[i, a] != 0
-    lo = tmin[i * step]
-    hi = tmax[i * step]
     return not (fine and nonzero and lo == lo and hi == hi)
 
 
@@ -487,7 +485,7 @@ def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tma
     mode, test, sphere_method : int
     origins, directions : ndarray, shape (N, 3)
     tmin, tmax : ndarray, shape (N,) or (1,)
-        Per-ray bounds, or one for every ray.
+        Per-ray bounds, or one for every ray (each on its own).
     start, stop : int
     out_t, out_obj, out_prim : ndarray, shape (N,) or (0,)
         CLOSEST: t (inf on a miss), object (-1 on a miss) and primitive id (face index, or 0 for
@@ -511,20 +509,23 @@ def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tma
         The first refused ray, or N if none (refused rays are not traced).
     """
     n = len(origins)
-    step = 1 if len(tmin) == n else 0
+    lo_step = 1 if len(tmin) == n else 0
+    hi_step = 1 if len(tmax) == n else 0
     hit_obj = int_row[INT_FIXED:INT_FIXED + capacity]
     hit_prim = int_row[INT_FIXED + capacity:INT_FIXED + 2 * capacity]
     hit_t = real_row[REAL_FIXED:REAL_FIXED + capacity]
     barycentrics = len(out_u) > 0
     first_bad = n
     for i in range(start, stop):
-        if _bad_ray(origins, directions, tmin, tmax, i, step):
+        lo = tmin[i * lo_step]
+        hi = tmax[i * hi_step]
+        if _bad_ray(origins, directions, i, lo, hi):
             first_bad = min(first_bad, i)
             continue
         t, obj, prim, u, v, found = trace_ray(
             scene, mode, test, sphere_method, origins[i, 0], origins[i, 1], origins[i, 2],
-            directions[i, 0], directions[i, 1], directions[i, 2], tmin[i * step],
-            tmax[i * step], int_row, real_row, hit_t, hit_obj, hit_prim)
+            directions[i, 0], directions[i, 1], directions[i, 2], lo, hi, int_row, real_row,
+            hit_t, hit_obj, hit_prim)
         if mode == ANY:
             out_hit[i] = obj >= 0
         elif mode == CLOSEST:
