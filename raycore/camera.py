@@ -67,6 +67,11 @@ def _plane_rays_kernel(center, right, up, across, rise, unit, constant, points, 
                 constants[row, k] = constant[k]
 
 
+def _check_fov(fov):
+    if not 0 < fov < 180:
+        raise ValueError(f"fov must be in (0, 180) degrees, got {fov!r}")
+
+
 def perspective_rays(position, look_at, up, fov, width, height, dtype="float64"):
     """Pinhole camera rays.
 
@@ -90,8 +95,7 @@ def perspective_rays(position, look_at, up, fov, width, height, dtype="float64")
     ValueError
         Naming the argument that is out of range or degenerate.
     """
-    if not 0 < fov < 180:
-        raise ValueError(f"fov must be in (0, 180) degrees, got {fov!r}")
+    _check_fov(fov)
     position, right, true_up, forward = _frame(position, look_at, up)
     x, y = _pixel_grid(width, height)
     # offsets on the image plane at distance 1, per column and per row
@@ -176,8 +180,7 @@ def frame_box(lo, hi, width, height, *, fov=45.0, position=None, look_at=None,
     ValueError
         Naming the argument that is out of range or degenerate.
     """
-    if not 0 < fov < 180:
-        raise ValueError(f"fov must be in (0, 180) degrees, got {fov!r}")
+    _check_fov(fov)
     if not 0 < fill <= 1:
         raise ValueError(f"fill must be in (0, 1], got {fill!r}")
     _pixel_grid(width, height)  # checks them
