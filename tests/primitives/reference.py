@@ -191,7 +191,7 @@ def box_fraction(o, d, lo, hi, tmin=0.0, tmax=math.inf):
     return _fr_slabs(_fractions(lo), _fractions(hi), _fractions(o), _fractions(d), tmin, tmax)
 
 
-def _fr_inverse(m):
+def fraction_inverse(m):
     """Exact inverse of a 3x3 matrix of Fractions (Gauss–Jordan)."""
     rows = [list(row) + [Fraction(int(i == j)) for j in range(3)] for i, row in enumerate(m)]
     for col in range(3):
@@ -208,7 +208,7 @@ def _fr_inverse(m):
 def transformed_box_fraction(o, d, lo, hi, transform, tmin=0.0, tmax=math.inf):
     """Nearest hit of one ray with the box [lo, hi] under an affine transform, exact."""
     matrix = [_fractions(row) for row in np.asarray(transform)[:3]]
-    inverse = _fr_inverse([row[:3] for row in matrix])
+    inverse = fraction_inverse([row[:3] for row in matrix])
     offset = [x - row[3] for x, row in zip(_fractions(o), matrix, strict=True)]
     local_o = [_fr_dot(row, offset) for row in inverse]
     local_d = [_fr_dot(row, _fractions(d)) for row in inverse]

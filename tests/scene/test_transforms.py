@@ -8,6 +8,7 @@ import pytest
 
 from raycore.mesh import affine_inverse, affine_product, condition_number
 from raycore.primitives import box
+from tests.primitives.reference import fraction_inverse
 
 from .brute import exact_inverse, random_affine
 
@@ -40,19 +41,6 @@ def test_the_product_is_the_exact_one_rounded_once():
         assert np.array_equal(affine_product(a, b), exact)
 
 
-def rational_inverse(linear):
-    """The exact inverse of a 3x3 matrix of Fractions (Gauss-Jordan), as nested lists."""
-    rows = [list(linear[i]) + [Fraction(int(i == j)) for j in range(3)] for i in range(3)]
-    for col in range(3):
-        pivot = next(r for r in range(col, 3) if rows[r][col] != 0)
-        rows[col], rows[pivot] = rows[pivot], rows[col]
-        rows[col] = [x / rows[col][col] for x in rows[col]]
-        for r in range(3):
-            if r != col:
-                rows[r] = [x - rows[r][col] * y for x, y in zip(rows[r], rows[col], strict=True)]
-    return [row[3:] for row in rows]
-
-
 def test_the_condition_number_is_exact_and_near_the_2_norm_one():
     rng = np.random.default_rng(2)
     for log_condition in (0, 4, 8, 11):
@@ -60,7 +48,7 @@ def test_the_condition_number_is_exact_and_near_the_2_norm_one():
             linear = ill_conditioned(rng, log_condition, 0)[:3, :3]
             exact = [[Fraction(x) for x in row] for row in linear.tolist()]
             norm = max(sum(abs(x) for x in row) for row in exact)
-            inverse_norm = max(sum(abs(x) for x in row) for row in rational_inverse(exact))
+            inverse_norm = max(sum(abs(x) for x in row) for row in fraction_inverse(exact))
             kappa = condition_number(linear)
             assert kappa == float(norm * inverse_norm)
             assert np.linalg.cond(linear) / 3 <= kappa * (1 + 1e-6) <= 3 * np.linalg.cond(
@@ -88,7 +76,7 @@ def test_transformed_box_bounds_hold_the_box_the_kernels_test():
         params = box.pack_transformed(lo, hi, m)
         stored = np.vstack([params[6:18].reshape(3, 4), [0, 0, 0, 1]])
         to_world = [[Fraction(x) for x in row] for row in stored.tolist()]
-        linear = rational_inverse([row[:3] for row in to_world[:3]])
+        linear = fraction_inverse([row[:3] for row in to_world[:3]])
         shift = [-sum(linear[i][k] * to_world[k][3] for k in range(3)) for i in range(3)]
         b_lo, b_hi = box.bounds_transformed(params)
         for corner in np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, 8).T:
