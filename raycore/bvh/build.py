@@ -145,7 +145,7 @@ def _build_subtree(prims, nodes, refs, root, start, end, root_cbox, depth, first
         elif hi - lo > 2:
             clear_bins(counts, boxes, used)
             bin_range(prims, lo, hi, cbox, scale, used, counts, boxes)
-            best = best_split(counts, boxes, scale, used, suffix, costs[3])
+            best = best_split(counts, boxes, scale, used, suffix, np.int64(costs[3]))
         if made_leaf(nodes, refs, node, lo, hi, costs, best):
             continue
         mid = divide(prims, lo, hi, used, best, sides, cbox, scale)
