@@ -24,9 +24,7 @@ INVALID_ID = np.iinfo(np.uint32).max
 
 def _rays(rays, nthreads):
     """(origins (N, 3), directions (N, 3), leading shape) of Open3D-style ``rays``."""
-    if hasattr(rays, "numpy") and not isinstance(rays, np.ndarray):
-        rays = rays.numpy()  # an open3d.core.Tensor
-    rays = np.asarray(rays)
+    rays = np.asarray(_numpy(rays))
     if rays.ndim < 2 or rays.shape[-1] != 6:
         raise ValueError(f"rays must have shape (..., 6), got {rays.shape}")
     if not isinstance(nthreads, (int, np.integer)) or nthreads < 0:
@@ -160,5 +158,6 @@ def _pinhole(intrinsic_matrix, extrinsic_matrix, width_px, height_px):
 
 
 def _numpy(value):
+    """``value`` as NumPy sees it (an ``open3d.core.Tensor`` through its ``.numpy()``)."""
     return value.numpy() if hasattr(value, "numpy") and not isinstance(value, np.ndarray) \
         else value
