@@ -126,7 +126,10 @@ def _build_subtree(prims, nodes, refs, root, start, end, root_cbox, depth, first
     # work stack: (node, start, end, depth) and the node's centroid box
     stack = np.empty((MAX_DEPTH + 2, 4), np.int64)
     stack_cbox = np.empty((MAX_DEPTH + 2, 6), np.float32)
-    sides[0, CENTROIDS:CENTROIDS + 6] = root_cbox
+    # element by element: assigning an array to a slice compiles NumPy's shape-mismatch error,
+    # 1.7-2.6 s of a first build's compile for each kernel that does it
+    for k in range(6):
+        sides[0, CENTROIDS + k] = root_cbox[k]
     _push(stack, stack_cbox, 0, root, start, end, depth, sides, 0)
     top = 1
     free = first_free
@@ -183,7 +186,8 @@ def _bound_all(prims):
     for c in prange(chunks):
         own = np.empty((1, SIDE_WIDTH), np.float32)  # see _bin_items
         bound_range(prims, c * CHUNK, min(n, (c + 1) * CHUNK), own, 0)
-        parts[c] = own[0]
+        for k in range(SIDE_WIDTH):  # not a slice assignment: see _build_subtree
+            parts[c, k] = own[0, k]
     acc = np.empty((1, SIDE_WIDTH), np.float32)
     store_side(acc, 0, empty_side())
     for c in range(chunks):
