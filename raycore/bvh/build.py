@@ -214,8 +214,12 @@ def _bin_items(prims, items, cboxes, scales, bins):
         clear_bins(own_counts, own_boxes, bins)
         bin_range(prims, items[i, 0], items[i, 1], cboxes[node], scales[node], bins,
                    own_counts, own_boxes)
-        counts[i] = own_counts
-        boxes[i] = own_boxes
+        # element by element, not as slices: see _build_subtree
+        for a in range(3):
+            for b in range(bins):
+                counts[i, a, b] = own_counts[a, b]
+                for k in range(8):
+                    boxes[i, a, b, k] = own_boxes[a, b, k]
     return counts, boxes
 
 
@@ -261,7 +265,9 @@ def _partition_items(prims, items, frontier, best, cboxes, scales, bins):
             lefts[i] = min(max(mid - first, 0), stop - first)
             bound_range(prims, first, first + lefts[i], own, 0)
             bound_range(prims, first + lefts[i], stop, own, 1)
-        item_sides[i] = own
+        for side in range(2):  # not a slice assignment: see _build_subtree
+            for k in range(SIDE_WIDTH):
+                item_sides[i, side, k] = own[side, k]
     return lefts, item_sides
 
 
@@ -341,7 +347,14 @@ def _split_top(prims, nodes, refs, bins, block, task_size):
     made : int
         Nodes numbered so far (0 .. made - 1), or -1 when the tree would pass MAX_DEPTH.
     """
-    root = _bound_all(prims)
+    if len(prims) > task_size:
+        root = _bound_all(prims)
+    else:
+        # one subtree (a small mesh): bounded on this thread, and so is the subtree built
+        # (build_binary_bvh), so that a first build compiles neither parallel launcher
+        root = np.empty((1, SIDE_WIDTH), np.float32)
+        bound_range(prims, 0, len(prims), root, 0)
+        root = root[0]
     nodes[0, 0:6] = root[0:6]
     frontier = np.array([[0, 0, len(prims), 0]], np.int64)  # node, start, end, depth
     cboxes = root[None, CENTROIDS:CENTROIDS + 6].copy()
@@ -463,9 +476,13 @@ def build_binary_bvh(prims, params):
         # a subtree over m primitives adds at most 2m - 2 nodes below its root
         base = made + np.concatenate([[0], np.cumsum(2 * sizes - 2)[:-1]]).astype(np.int64)
         deepest = np.empty(len(tasks), np.int64)
-        with parallel_chunksize(1):
-            _build_tasks(prims, nodes, refs, tasks, task_cbox, base, schedule, bins, costs,
-                         deepest)
+        if len(tasks) == 1:
+            deepest[0] = _build_subtree(prims, nodes, refs, tasks[0, 0], tasks[0, 1], tasks[0, 2],
+                                        task_cbox[0], tasks[0, 3], base[0], bins, costs)
+        else:
+            with parallel_chunksize(1):
+                _build_tasks(prims, nodes, refs, tasks, task_cbox, base, schedule, bins, costs,
+                             deepest)
         too_deep = np.any(deepest < 0)
     if too_deep:
         raise ValueError("BVH deeper than MAX_DEPTH: the primitive bounds are degenerate")

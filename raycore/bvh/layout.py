@@ -218,7 +218,8 @@ def _collapse_subtrees(nodes, refs, roots, queue_size, first_rows, wide, write, 
         own = np.zeros(4)  # not a row of stats, which neighbouring subtrees' threads share
         rows[t], _ = _collapse(nodes, refs, roots[t], first_rows[t], 0, none, none, queue, wide,
                                write, False, own, block)
-        stats[t] = own
+        for k in range(4):  # not a slice assignment, whose shape check takes long to compile
+            stats[t, k] = own[k]
 
 
 def _wide_layout(binary, prim_count, block):
