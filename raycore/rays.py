@@ -66,6 +66,14 @@ def _converted(array, dtype):
         return np.ascontiguousarray(array, dtype=dtype)
 
 
+def _kernel_array(array, dtype):
+    """:func:`_converted`, copied too when read-only: the trace kernels take writable arrays
+    only, since Numba compiles a kernel again for each argument that is read-only (a float32
+    warm-up compiled the traversal six times, not three, for read-only rays and bounds)."""
+    array = _converted(array, dtype)
+    return array if array.flags.writeable else array.copy()
+
+
 def as_float_array(value, name, dtype, shape=None):
     """:func:`as_real_array`, and refuse NaN and inf entries (``ValueError`` naming ``name``)."""
     array = as_real_array(value, name, dtype, shape)
@@ -163,7 +171,7 @@ def _as_bound(value, name, count, dtype):
         return np.full(1, array, dtype)
     if array.shape != (count,):
         raise ValueError(f"{name} must be a scalar or have shape ({count},), got {array.shape}")
-    return _converted(array, dtype)
+    return _kernel_array(array, dtype)
 
 
 _SCALAR_BOUNDS = {}
@@ -174,10 +182,11 @@ def ray_arrays(origins, directions, tmin, tmax, dtype):
     """The arrays a query's compiled pass takes, with only the checks NumPy makes cheaply.
 
     ``dtype`` is a ``numpy.dtype`` (float32 or float64).
-    Arrays already C-contiguous in ``dtype`` are used as they are; bounds become (1,) arrays
-    when scalar (shared: kernels never write them).  What is wrong inside the arrays (NaN, inf,
-    zero directions, NaN bounds) is found by the compiled pass, which reports the first refused
-    ray; :func:`refuse` then says what is wrong with it.
+    Writable arrays already C-contiguous in ``dtype`` are used as they are (read-only ones are
+    copied: see :func:`_kernel_array`); bounds become (1,) arrays when scalar (shared: kernels
+    never write them).  What is wrong inside the arrays (NaN, inf, zero directions, NaN bounds)
+    is found by the compiled pass, which reports the first refused ray; :func:`refuse` then says
+    what is wrong with it.
 
     Returns
     -------
@@ -198,9 +207,9 @@ def ray_arrays(origins, directions, tmin, tmax, dtype):
 
 
 def _ready(array, dtype):
-    # an (N, 3) C-contiguous array of dtype, taken as it is
+    # an (N, 3) C-contiguous, writable array of dtype, taken as it is
     return (type(array) is np.ndarray and array.dtype is dtype and array.ndim == 2
-            and array.shape[1] == 3 and array.flags.c_contiguous)
+            and array.shape[1] == 3 and array.flags.c_contiguous and array.flags.writeable)
 
 
 def refuse(origins, directions, tmin, tmax, dtype):
@@ -219,7 +228,7 @@ def _contiguous_rays(origins, directions, dtype):
     if all(array.dtype == dtype and not array.flags.c_contiguous
            for array in (origins, directions)):
         return _gather_rays(origins, directions)
-    return _converted(origins, dtype), _converted(directions, dtype), None
+    return _kernel_array(origins, dtype), _kernel_array(directions, dtype), None
 
 
 def prepare_rays(origins, directions, tmin=0.0, tmax=np.inf, dtype=np.float64):
