@@ -76,9 +76,10 @@ def _trace_in_parallel(record, mode, test, sphere_method, origins, directions, t
 def _trace_here(record, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
                 out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t, hits_obj,
                 hits_prim, int_scratch, real_scratch, capacity):
+    # start as an int64, not a literal 0: trace_range would compile again, for this entry alone
     return trace_range(arrays_of(record), mode, test, sphere_method, origins, directions, tmin,
-                       tmax, 0, len(origins), out_t, out_obj, out_prim, out_hit, out_u, out_v,
-                       out_slot, offsets, hits_t, hits_obj, hits_prim, int_scratch[0],
+                       tmax, np.int64(0), len(origins), out_t, out_obj, out_prim, out_hit, out_u,
+                       out_v, out_slot, offsets, hits_t, hits_obj, hits_prim, int_scratch[0],
                        real_scratch[0], capacity)
 
 

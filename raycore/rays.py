@@ -66,6 +66,15 @@ def _converted(array, dtype):
         return np.ascontiguousarray(array, dtype=dtype)
 
 
+def read_only(array):
+    """A read-only view of ``array``.  Numba compiles separate code for read-only arrays (a
+    caller's broadcast or memory-mapped input): passing read-only views of arrays that may be
+    either keeps a kernel to one compiled version per precision and layout."""
+    view = array.view()
+    view.flags.writeable = False
+    return view
+
+
 def _kernel_array(array, dtype):
     """:func:`_converted`, copied too when read-only: the trace kernels take writable arrays
     only, since Numba compiles a kernel again for each argument that is read-only (a float32
@@ -227,7 +236,7 @@ def _contiguous_rays(origins, directions, dtype):
     directions = _real_array(directions, "directions", (len(origins), 3))
     if all(array.dtype == dtype and not array.flags.c_contiguous
            for array in (origins, directions)):
-        return _gather_rays(origins, directions)
+        return _gather_rays(read_only(origins), read_only(directions))
     return _kernel_array(origins, dtype), _kernel_array(directions, dtype), None
 
 

@@ -216,8 +216,9 @@ def _collapse_subtrees(nodes, refs, roots, queue_size, first_rows, wide, write, 
     for t in prange(len(roots)):
         queue = np.empty(queue_size, np.int64)
         own = np.zeros(4)  # not a row of stats, which neighbouring subtrees' threads share
-        rows[t], _ = _collapse(nodes, refs, roots[t], first_rows[t], 0, none, none, queue, wide,
-                               write, False, own, block)
+        # typed values, not literals, so that this call shares _wide_layout's compiled _collapse
+        rows[t], _ = _collapse(nodes, refs, roots[t], first_rows[t], np.int64(0), none, none,
+                               queue, wide, write, np.bool_(False), own, block)
         for k in range(4):  # not a slice assignment, whose shape check takes long to compile
             stats[t, k] = own[k]
 

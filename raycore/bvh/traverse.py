@@ -307,7 +307,7 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
     best_obj = -1
     best_prim = -1
     best_u = best_v = like(ox, 0)
-    found = 0
+    found = np.int64(0)  # not a literal 0, which would compile _trace_mesh once more
     # A scene of one untransformed mesh, the common case, goes straight into the mesh's BVH:
     # the loop over objects below costs 13-15 % on camera rays, most of which miss (bunny).
     if len(top_nodes) == 0 and len(direct) == 1 and kind[direct[0]] == MESH and \

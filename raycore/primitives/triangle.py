@@ -25,7 +25,7 @@ from numba.extending import overload
 
 from raycore._fp import like
 from raycore.hits import Hits
-from raycore.rays import as_float_array, prepare_rays, resolve_dtype
+from raycore.rays import as_float_array, prepare_rays, read_only, resolve_dtype
 
 WATERTIGHT = 0
 MOLLER = 1
@@ -407,14 +407,6 @@ def _intersect_pairs(test, origins, directions, tmin, tmax, a, b, c, t, uv, norm
             )
 
 
-def _read_only(array):
-    # Numba compiles separate code for read-only arrays (a caller's broadcast or memory-mapped
-    # input): passing read-only views always keeps it to one compiled kernel per precision.
-    view = array.view()
-    view.flags.writeable = False
-    return view
-
-
 def _as_triangle_vertices(value, name, count, dtype):
     array = as_float_array(value, name, dtype)
     if array.shape == (3,):
@@ -480,7 +472,7 @@ def intersect_triangles(
     t = np.empty(count, dtype=precision)
     uv_out = np.full((count if uv else 0, 2), np.nan, dtype=precision)
     normal_out = np.full((count if normal else 0, 3), np.nan, dtype=precision)
-    inputs = (_read_only(x) for x in (origins, directions, tmin, tmax, a, b, c))
+    inputs = (read_only(x) for x in (origins, directions, tmin, tmax, a, b, c))
     _intersect_pairs(code, *inputs, t, uv_out, normal_out)
     ids = np.where(t < np.inf, 0, -1).astype(np.int64)
     return Hits(
