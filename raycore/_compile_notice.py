@@ -11,8 +11,9 @@ import sys
 
 from numba.core import event
 
-MESSAGE = ("raycore: compiling kernels for this CPU, once (a minute or two; later runs load "
-           "them from Numba's cache, and `raycore warmup` compiles them all ahead of use)")
+MESSAGE = ("raycore: compiling kernels for this CPU, once (about half a minute for a first "
+           "answer; later runs load them from Numba's cache, and `raycore warmup` compiles "
+           "them all ahead of use)")
 
 
 class CompileNotice(event.Listener):
