@@ -4,6 +4,7 @@ Two routers: ``router`` (reading, queries, renders) is always open; ``guarded`` 
 deletions) changes the store, and the app includes it behind the API key when one is configured.
 """
 
+import time
 from typing import Annotated
 
 from fastapi import APIRouter, Depends, Query, Request, Response
@@ -158,7 +159,9 @@ async def intersect(scene_id: str, request: Request, state: State,
     if media_type not in ("application/json", codecs.NPY):
         raise UnsupportedMedia("Content-Type must be application/json or application/x-npy, "
                                f"got {media_type or 'none'}")
+    start = time.perf_counter()
     body = await (read_body(request) if media_type == codecs.NPY else request.body())
+    received = time.perf_counter()
     accept = request.headers.get("accept", "")
     in_url = set(request.query_params) & set(UrlOptions.model_fields)
     max_rays = state.settings.max_rays
@@ -188,7 +191,11 @@ async def intersect(scene_id: str, request: Request, state: State,
         return encode_columns(columns, accept)
 
     content, answer_type = await state.compute(answer)
-    return Response(content, media_type=answer_type)
+    # where the service's time went: receiving the body, and the rays' work (with its wait for
+    # a compute slot)
+    timing = (f"body;dur={1000 * (received - start):.1f}, "
+              f"compute;dur={1000 * (time.perf_counter() - received):.1f}")
+    return Response(content, media_type=answer_type, headers={"server-timing": timing})
 
 
 def _parse_json(model, body):
