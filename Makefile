@@ -69,7 +69,7 @@ BENCH_ARGS ?=
 bench: $(VENV)/.bench-installed
 	$(BIN)/python -m benchmarks.run $(BENCH_ARGS)
 	$(BIN)/python -m benchmarks.latency $(filter --quick,$(BENCH_ARGS))
-	$(BIN)/python -m benchmarks.service_bench
+	$(BIN)/python -m benchmarks.service_bench $(filter --quick,$(BENCH_ARGS))
 
 # docs/speed-vs-accuracy.png and docs/model-what-you-need.png with their Markdown tables
 # (benchmarks/speed_accuracy.py).  The error figures come from tests/stability's catalogue and

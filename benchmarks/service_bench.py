@@ -1,22 +1,30 @@
-"""HTTP service overhead: the service's answers against in-process ``Scene`` calls, same scene.
+"""HTTP service overhead: the service's answers against in-process calls, same scene.
 
-A real ``raycore serve`` (uvicorn) on loopback, driven with the service's Python client
-(:class:`service.client.Client`), and a ~100k-triangle scene
-(nefertiti from ../shared/meshes when present, else a procedural torus of 100k triangles) on a
-floor plane:
+A real ``raycore serve`` (uvicorn, with httptools and uvloop) on loopback, and a ~100k-triangle
+scene (nefertiti from ../shared/meshes when present, else a procedural torus of 100k triangles)
+on a floor plane:
 
-* intersect: ~1M rays (1024x1024 camera rays, and 1M random rays from inside the bounds) as a
-  float32 (N, 6) .npy body, answered as .npy; end to end (encode, send, trace, answer, decode)
-  against ``Scene.intersect`` on the same arrays.  Bar: HTTP throughput >= 50 % of in-process.
+* intersect, per client: ~1M rays (1024x1024 camera rays, and 1M random rays from inside the
+  bounds) as a float32 (N, 6) .npy body, answered as .npy, end to end from the (N, 3) arrays to
+  the answer's table, against ``Scene.intersect`` on the same arrays.  Clients: the project's
+  (:class:`service.client.Client`), and httpx, requests and curl as their users write it
+  (``np.save`` of the stacked rays, ``np.load`` of the answer; curl in its own process with
+  files, and left out, said so, when it is not on the PATH).
+* generated: 1M rays that the service makes from a JSON ``"rays"`` (a 1024x1024 perspective
+  camera, its hits' t as .npy; a 128-channel LiDAR of 8192 columns, its point cloud as .npy),
+  over httpx, against making them with ``raycore.sensors`` and intersecting in process; the
+  answers must be equal.
 * render: a 512x512 lambert PNG with shadows against the in-process time of tracing its primary
   and shadow rays (``Scene.intersect`` + ``Scene.occluded`` inside ``raycore.render``).
-  Bar: HTTP time <= 1.5x.
 
-The service's own share of each HTTP time (its Server-Timing header: from the request's arrival,
-body included, to the answer's start) is recorded as ``http_server_s``.  Best of a few
-interleaved runs each (the machine's load average is recorded: on a shared machine the ratios
-move with it).  Prints the ratios and writes benchmarks/results/service.json.
-Run with ``python -m benchmarks.service_bench [--repeats N]``.
+Each HTTP row splits the time by the service's Server-Timing header: ``body`` (receiving the
+request body), ``compute`` (the rays' work), ``app`` (from the request's arrival to the answer's
+start), and the rest, outside the service (the client's own work and the transfer of the
+answer).  Best of a few interleaved rounds each (the machine's load average is recorded: on a
+shared machine the ratios move with it).  Bars from issue 18: httpx >= 0.8 of in-process on
+camera rays and >= 0.9 on random rays; generated rays >= 0.9; render <= 1.5x.  Prints a table
+and writes benchmarks/results/service.json.  Run with
+``python -m benchmarks.service_bench [--repeats N] [--quick]``.
 """
 
 import argparse
@@ -147,15 +155,23 @@ class StandardClients:
         return ["httpx", "requests"] + (["curl"] if self.curl else [])
 
     def call(self, name, path, origins, directions):
+        """(the answer's table, its timings): the service's and, as ``client_encode`` and
+        ``client_decode``, the client's own NumPy work before sending and after receiving."""
+        start = time.perf_counter()
         body = npy_bytes(np.hstack([origins, directions]))
-        if name == "httpx":
-            answer = self.httpx.post(self.url + path, content=body, headers=NPY_HEADERS)
-        elif name == "requests":
-            answer = self.requests.post(self.url + path, data=body, headers=NPY_HEADERS)
+        encoded = time.perf_counter()
+        if name == "curl":
+            table, timing, decode = self._curl(path, body)
         else:
-            return self._curl(path, body)
-        answer.raise_for_status()
-        return npy_table(answer.content), server_timing(answer.headers)
+            if name == "httpx":
+                answer = self.httpx.post(self.url + path, content=body, headers=NPY_HEADERS)
+            else:
+                answer = self.requests.post(self.url + path, data=body, headers=NPY_HEADERS)
+            answer.raise_for_status()
+            received = time.perf_counter()
+            table, timing = npy_table(answer.content), server_timing(answer.headers)
+            decode = time.perf_counter() - received
+        return table, {**timing, "client_encode": encoded - start, "client_decode": decode}
 
     def _curl(self, path, body):
         """curl in a process of its own, the rays and the answer in files (as from a shell);
@@ -167,10 +183,12 @@ class StandardClients:
                         *(f"-H{name}: {value}" for name, value in NPY_HEADERS.items()),
                         "--dump-header", str(headers), "--output", str(hits), self.url + path],
                        check=True)
+        received = time.perf_counter()
         lines = headers.read_text().splitlines()
         header = {name.strip().lower(): value.strip() for name, _, value in
                   (line.partition(":") for line in lines[1:] if ":" in line)}
-        return np.load(hits, allow_pickle=False), server_timing(header)
+        table = np.load(hits, allow_pickle=False)
+        return table, server_timing(header), time.perf_counter() - received
 
 
 def bench_intersect(client, standard, scene_id, scene, rays, repeats):
@@ -202,7 +220,8 @@ def bench_intersect(client, standard, scene_id, scene, rays, repeats):
 
 def _best(row, seconds, timing):
     """The fastest of each figure over the rounds (each is its own best)."""
-    new = {"http_s": seconds, **{f"server_{name}_s": value for name, value in timing.items()}}
+    new = {"http_s": seconds, **{(name if name.startswith("client") else f"server_{name}")
+                                 + "_s": value for name, value in timing.items()}}
     return new if row is None else {key: min(value, new[key]) for key, value in row.items()}
 
 
@@ -283,7 +302,10 @@ def main(argv=None):
     parser.add_argument("--repeats", type=int, default=10,
                         help="interleaved runs per intersect measurement; renders (cheaper) get "
                              "three times as many")
+    parser.add_argument("--quick", action="store_true", help="a smoke run: two rounds")
     args = parser.parse_args(argv)
+    if args.quick:
+        args.repeats = 2
 
     name, data = mesh_file()
     mesh = load_trimesh(io.BytesIO(data), "ply")
@@ -336,14 +358,16 @@ def main(argv=None):
     if not standard.curl:
         print("curl is not on the PATH: not measured")
     print("rays      client          in-process  HTTP      ratio  service: body compute  app"
-          "   outside the service")
+          "   outside the service (of which np.save, np.load)")
     for kind in ("camera", "random"):
         row = intersect[kind]
         for client_name, timing in row["clients"].items():
+            numpy_work = (f" ({timing['client_encode_s']:.3f}, {timing['client_decode_s']:.3f})"
+                          if "client_encode_s" in timing else "")
             print(f"{kind:9s} {client_name:15s} {row['in_process_s']:.3f} s   "
                   f"{timing['http_s']:.3f} s  {timing['ratio']:.2f}   "
                   f"{timing['server_body_s']:.3f}  {timing['server_compute_s']:.3f}  "
-                  f"{timing['server_app_s']:.3f} {timing['outside_service_s']:.3f}")
+                  f"{timing['server_app_s']:.3f} {timing['outside_service_s']:.3f}{numpy_work}")
     for kind, timing in report["generated"].items():
         print(f"{kind:9s} {'generated/httpx':15s} {timing['in_process_s']:.3f} s   "
               f"{timing['http_s']:.3f} s  {timing['ratio']:.2f}   "
