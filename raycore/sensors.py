@@ -188,6 +188,10 @@ def _check_count(value, name):
         raise ValueError(f"{name} must be a positive integer, got {value!r}")
 
 
+#: Rays per block of :func:`lidar`'s float64 arithmetic (1.5 MiB of float64 directions)
+_BLOCK_RAYS = 2**16
+
+
 def lidar(position, forward=(1.0, 0.0, 0.0), up=(0.0, 0.0, 1.0), *, preset=None,
           elevations=None, vertical_fov=None, channels=None, horizontal_resolution=None,
           columns=None, min_range=None, max_range=None, dtype="float64"):
@@ -243,10 +247,6 @@ max_range
     origins = np.empty_like(directions)
     origins[:] = position
     return SensorRays(origins, directions, min_range, max_range)
-
-
-#: Rays per block of :func:`lidar`'s float64 arithmetic (1.5 MiB of float64 directions)
-_BLOCK_RAYS = 2**16
 
 
 def _sensor_frame(forward, up):
