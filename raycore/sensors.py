@@ -255,11 +255,17 @@ def _sensor_frame(forward, up):
     up = as_float_array(up, "up", np.float64, (3,))
     if not np.any(up):
         raise ValueError("up must not be zero")
-    up = up / np.linalg.norm(up)
+    if not np.any(forward):
+        raise ValueError("forward must not be zero")
+    # scaled to a largest component of 1 first, so that tiny and huge vectors' squares neither
+    # underflow nor overflow
+    up = up / np.abs(up).max()
+    up /= np.linalg.norm(up)
+    forward = forward / np.abs(forward).max()
     level = forward - (forward @ up) * up
     norm = np.linalg.norm(level)
     if norm <= 1e-9 * np.linalg.norm(forward):
-        raise ValueError("forward must not be zero or parallel to up")
+        raise ValueError("forward must not be parallel to up")
     level /= norm
     return level, np.cross(up, level), up
 

@@ -60,6 +60,14 @@ def test_lidar_pose_turns_counter_clockwise_about_up_from_forward():
     np.testing.assert_allclose(rays.directions[4], c * forward + s * up, atol=1e-15)
 
 
+@pytest.mark.parametrize("scale", [1e-200, 1e200])
+def test_pose_vectors_of_any_length(scale):
+    rays = sensors.lidar([0, 0, 0], forward=[scale, 0.0, 0.0], up=[0.0, 0.0, 3 * scale],
+                         elevations=[0.0], columns=4)
+    np.testing.assert_allclose(rays.directions, [[1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0]],
+                               atol=1e-15)
+
+
 def test_vertical_fov_spreads_channels_evenly_and_resolution_sets_columns():
     rays = sensors.lidar([0, 0, 0], vertical_fov=[-30.0, 10.0], channels=5,
                          horizontal_resolution=0.5)
@@ -131,6 +139,7 @@ def test_lidar_ranges_are_distances_to_a_wall():
     ({"elevations": [0.0], "columns": 8, "max_range": np.nan}, "max_range"),
     ({"preset": "velodyne-vlp1", "columns": 8}, "preset"),
     ({"elevations": [0.0], "columns": 8, "forward": [0, 0, 2]}, "forward"),
+    ({"elevations": [0.0], "columns": 8, "forward": [0, 0, 0]}, "forward"),
     ({"elevations": [0.0], "columns": 8, "up": [0, 0, 0]}, "up"),
     ({"elevations": [0.0], "columns": 8, "dtype": "float16"}, "dtype"),
 ])
