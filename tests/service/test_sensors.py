@@ -81,7 +81,11 @@ def test_camera_rays_are_the_render_cameras(client, scene_id):
                                height=30, dtype="float32")
     hits = scene_in_process().intersect(*rays, fields=("normal",))
     assert len(set(hits.geom_id.tolist())) >= 5
-    np.testing.assert_array_equal(answer.json()["geom_id"], hits.geom_id)
+    got = answer.json()
+    np.testing.assert_array_equal(got["geom_id"], hits.geom_id)
+    np.testing.assert_array_equal([np.inf if t is None else t for t in got["t"]], hits.t)
+    normals = [[np.nan] * 3 if n is None else n for n in got["normal"]]
+    np.testing.assert_array_equal(normals, hits.normal)
     # the orthographic camera's view height is required, as the render's
     bad = client.post(f"/v1/scenes/{scene_id}/intersect",
                       json={"rays": {**camera, "type": "orthographic"}})
