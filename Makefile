@@ -39,7 +39,7 @@ test: $(VENV)/.dev-installed
 # service's fuzzing, which compile nothing that these do not.
 PYTHON313 ?= $(or $(shell python3.13 -c 'import sys; print(sys.executable)' 2>/dev/null),\
 	$(lastword $(sort $(wildcard $(shell pyenv root 2>/dev/null)/versions/3.13*/bin/python3.13))))
-PY313_TESTS ?= tests/scene tests/bvh tests/service tests/test_camera.py tests/test_offset.py \
+PY313_TESTS ?= tests/scene tests/bvh tests/service tests/test_camera.py tests/test_sensors.py tests/test_offset.py \
 	tests/test_render.py tests/test_threading.py tests/test_info.py tests/test_compile_notice.py tests/test_warmup.py \
 	tests/test_ray_bounds.py tests/commands tests/integrations/test_trimesh.py \
 	--ignore tests/service/test_schemathesis.py --ignore tests/service/test_fuzz.py
@@ -69,7 +69,7 @@ BENCH_ARGS ?=
 bench: $(VENV)/.bench-installed
 	$(BIN)/python -m benchmarks.run $(BENCH_ARGS)
 	$(BIN)/python -m benchmarks.latency $(filter --quick,$(BENCH_ARGS))
-	$(BIN)/python -m benchmarks.service_bench
+	$(BIN)/python -m benchmarks.service_bench $(filter --quick,$(BENCH_ARGS))
 
 # docs/speed-vs-accuracy.png and docs/model-what-you-need.png with their Markdown tables
 # (benchmarks/speed_accuracy.py).  The error figures come from tests/stability's catalogue and

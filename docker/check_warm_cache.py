@@ -166,6 +166,22 @@ def intersect_requests(seed):
                         fortran = np.asfortranarray(six)
                         yield (f"npy {ray_dtype} fortran {query} {test} {fields} {accept}",
                                npy_bytes(fortran), NPY, accept, params)
+    # rays that the service makes from a sensor (raycore.sensors)
+    sensors = [
+        {"type": "perspective", "position": [7, 5, -9], "look_at": [0, 1, 0], "width": 16,
+         "height": 12},
+        {"type": "orthographic", "position": [0, 6, -9], "look_at": [0, 1, 0],
+         "view_height": 8, "width": 16, "height": 12},
+        {"type": "lidar", "position": [0, 0.5, -8], "forward": [0, 0, 1], "up": [0, 1, 0],
+         "vertical_fov": [-20, 20], "channels": 8, "columns": 32, "max_range": 40},
+        {"type": "points", "sources": [[0, 0.5, -8]], "targets": [[0, 0.5, 8], [3, 1, 0]]}]
+    for sensor in sensors:
+        for query in ("closest", "any"):
+            body = json.dumps({"rays": sensor, "query": query}).encode()
+            yield f"rays {sensor['type']} {query}", body, "application/json", NPY, None
+    cloud = json.dumps({"rays": {**sensors[2], "point_cloud": True}}).encode()
+    for accept in (None, NPY, "model/ply"):
+        yield f"rays lidar point cloud {accept}", cloud, "application/json", accept, None
 
 
 def render_requests():

@@ -15,9 +15,10 @@ from raycore._compile_notice import announce_compiles  # noqa: E402
 
 announce_compiles()
 
+from raycore import sensors  # noqa: E402
 from raycore._info import info  # noqa: E402
 from raycore.hits import AllHits, Hits  # noqa: E402
 from raycore.offset import offset_ray_origin  # noqa: E402
 from raycore.scene import Scene  # noqa: E402
 
-__all__ = ["AllHits", "Hits", "Scene", "info", "offset_ray_origin"]
+__all__ = ["AllHits", "Hits", "Scene", "info", "offset_ray_origin", "sensors"]

@@ -9,6 +9,7 @@ import numpy as np
 
 from raycore.camera import orthographic_rays, perspective_rays
 from raycore.render import render
+from service import codecs
 from service.errors import ClientError
 
 
@@ -44,6 +45,47 @@ def run_query(scene, rays, options):
         return scene.count(*rays, triangle_test=test)
     except ValueError as error:
         raise ClientError(str(error)) from error
+
+
+def encode_columns(columns, accept):
+    """Result columns as the Accept header asks: (.npy bytes, its media type), else JSON's."""
+    if codecs.accepts_npy(accept):
+        return codecs.columns_to_npy(columns), codecs.NPY
+    return codecs.columns_to_json(columns), "application/json"
+
+
+def lidar_answer(scene, rays, options, point_cloud, accept):
+    """A LiDAR's answer: closest hits with each return's ``range`` and hit ``point`` besides
+    the asked fields, or (``point_cloud``) the hit points alone, in ray order, as the Accept
+    header asks (.npy, PLY, else JSON ``points``); other queries answer as for any rays.
+
+    Returns
+    -------
+    content : bytes-like
+    media_type : str
+
+    Raises
+    ------
+    ClientError
+        For a point cloud of a query other than closest, and rays the library refuses.
+    """
+    if options.query != "closest":
+        if point_cloud:
+            raise ClientError(f"point_cloud applies to closest-hit queries, not "
+                              f"query={options.query}")
+        return encode_columns(codecs.result_columns(options.query,
+                                                    run_query(scene, rays, options)), accept)
+    fields = [*options.fields, *(["point"] if "point" not in options.fields else [])]
+    hits = run_query(scene, rays, options.model_copy(update={"fields": fields}))
+    if point_cloud:
+        points = hits.point[hits.hit]
+        if codecs.accepts_npy(accept):
+            return codecs.array_to_npy(points), codecs.NPY
+        if codecs.accepts(accept, codecs.PLY):
+            return codecs.points_to_ply(points), codecs.PLY
+        return codecs.columns_to_json({"points": points}), "application/json"
+    # directions are unit length: t is the distance from the sensor
+    return encode_columns({**codecs.result_columns("closest", hits), "range": hits.t}, accept)
 
 
 def render_image(scene, colors, spec):

@@ -126,7 +126,7 @@ async def _lifespan(app):
 class ServerTiming:
     """ASGI middleware: a ``Server-Timing: app;dur=<ms>`` header, the time from the request's
     arrival to its answer's start (reading the body included), so that clients can tell the
-    service's time from the network's."""
+    service's time from the network's; after the metrics that the route gave, if any."""
 
     def __init__(self, app):
         self.app = app
@@ -139,9 +139,14 @@ class ServerTiming:
 
         async def timed_send(message):
             if message["type"] == "http.response.start":
-                elapsed = f"app;dur={1000 * (time.perf_counter() - start):.1f}"
-                message = {**message, "headers": [*message.get("headers", []),
-                                                  (b"server-timing", elapsed.encode())]}
+                elapsed = f"app;dur={1000 * (time.perf_counter() - start):.1f}".encode()
+                headers = message.get("headers", [])
+                # a route's own metrics (e.g. intersect's body and compute) lead, in one header
+                own = [value for name, value in headers if name.lower() == b"server-timing"]
+                headers = [(name, value) for name, value in headers
+                           if name.lower() != b"server-timing"]
+                message = {**message, "headers": [
+                    *headers, (b"server-timing", b", ".join([*own, elapsed]))]}
             await send(message)
 
         await self.app(scope, receive, timed_send)

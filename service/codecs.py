@@ -11,6 +11,7 @@ import zlib
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
+import trimesh
 
 from service.errors import BadRequest, ClientError
 
@@ -21,9 +22,17 @@ NPY = "application/x-npy"
 _ID_DTYPE = np.dtype("<i4")
 
 
+PLY = "model/ply"
+
+
 def accepts_npy(accept):
     """Whether an Accept header lists .npy."""
-    return any(part.split(";")[0].strip().lower() == NPY for part in accept.split(","))
+    return accepts(accept, NPY)
+
+
+def accepts(accept, media_type):
+    """Whether an Accept header lists ``media_type``."""
+    return any(part.split(";")[0].strip().lower() == media_type for part in accept.split(","))
 
 
 #: Bytes of an .npy file that can hold its header: NumPy refuses headers over 10,000 bytes.
@@ -206,6 +215,28 @@ def columns_to_npy(columns):
     for name, column in columns.items():
         table[name] = column
     return memoryview(buffer)
+
+
+def array_to_npy(array):
+    """An .npy file of a plain array, written straight after its header (as
+    :func:`columns_to_npy`).
+
+    Returns
+    -------
+    memoryview
+    """
+    array = np.ascontiguousarray(array, array.dtype.newbyteorder("<"))
+    header = npy_header(array.dtype, array.shape)
+    buffer = bytearray(len(header) + array.nbytes)
+    buffer[:len(header)] = header
+    buffer[len(header):] = memoryview(array).cast("B")
+    return memoryview(buffer)
+
+
+def points_to_ply(points):
+    """Binary PLY bytes of an (M, 3) point cloud (its vertices only), written by trimesh, which
+    stores them as float32 (as LiDAR point clouds usually are; .npy keeps the scene's dtype)."""
+    return trimesh.PointCloud(points).export(file_type="ply", encoding="binary")
 
 
 def png(image):

@@ -12,6 +12,15 @@ LIMITS = [
     ("IntersectRequest", "directions", "maxItems", "max_rays"),
     ("IntersectRequest", "tmin", "maxItems", "max_rays"),
     ("IntersectRequest", "tmax", "maxItems", "max_rays"),
+    ("PerspectiveRays", "width", "maximum", "max_rays"),
+    ("PerspectiveRays", "height", "maximum", "max_rays"),
+    ("OrthographicRays", "width", "maximum", "max_rays"),
+    ("OrthographicRays", "height", "maximum", "max_rays"),
+    ("LidarRays", "elevations", "maxItems", "max_rays"),
+    ("LidarRays", "channels", "maximum", "max_rays"),
+    ("LidarRays", "columns", "maximum", "max_rays"),
+    ("PointRays", "sources", "maxItems", "max_rays"),
+    ("PointRays", "targets", "maxItems", "max_rays"),
     ("MeshObject", "faces", "maxItems", "max_triangles"),
     ("PerspectiveCamera", "width", "maximum", "max_render_pixels"),
     ("PerspectiveCamera", "height", "maximum", "max_render_pixels"),
@@ -33,19 +42,24 @@ def document(app, settings):
         openapi = get_openapi(title=app.title, version=app.version,
                               description=app.description, routes=app.routes)
         schemas = openapi["components"]["schemas"]
-        # the intersect body is read by the route itself (JSON or .npy): not a FastAPI parameter
-        schemas["IntersectRequest"] = IntersectRequest.model_json_schema(
-            ref_template="#/components/schemas/{model}")
+        # the intersect body is read by the route itself (JSON or .npy): not a FastAPI
+        # parameter; its sensors' schemas join the components
+        request = IntersectRequest.model_json_schema(ref_template="#/components/schemas/{model}")
+        schemas.update(request.pop("$defs"))
+        schemas["IntersectRequest"] = request
         for schema, name, keyword, limit in LIMITS:
             _limit(schemas[schema]["properties"][name], keyword, getattr(settings, limit))
+        # a finer horizontal step would make more columns than the ray limit
+        _limit(schemas["LidarRays"]["properties"]["horizontal_resolution"], "minimum",
+               360 / settings.max_rays)
         app.openapi_schema = openapi
     return app.openapi_schema
 
 
 def _limit(schema, keyword, value):
     """Set ``keyword`` on ``schema``, or on each of its ``anyOf`` branches that it applies to
-    (``maxItems`` to arrays, ``maximum`` to numbers)."""
-    kind = "array" if keyword == "maxItems" else ("integer", "number")
+    (``maxItems`` to arrays, ``maximum`` and ``minimum`` to numbers)."""
+    kind = "array" if keyword == "maxItems" else ("integer", "number")  # maximum, minimum
     branches = schema.get("anyOf", [schema])
     for branch in branches:
         if branch.get("type") in kind:

@@ -1,5 +1,6 @@
 """Health, readiness and the demo scene."""
 
+import io
 import threading
 import time
 from dataclasses import replace
@@ -13,7 +14,7 @@ import service.app
 from service.app import create_app
 from service.demo import DEMO_CAMERA, demo_spec, load_demo, torus
 
-from .data import SETTINGS, SPEC
+from .data import SETTINGS, SPEC, rays
 from .test_render_png import decode
 
 
@@ -102,3 +103,18 @@ def test_answers_carry_the_service_time(client):
     for response in (client.get("/healthz"), client.get("/v1/scenes/none")):
         name, duration = response.headers["server-timing"].split(";dur=")
         assert name == "app" and float(duration) >= 0
+
+
+def test_intersect_says_where_its_time_went(client, scene_id):
+    origins, directions = rays()
+    body = io.BytesIO()
+    np.save(body, np.hstack([origins, directions]).astype(np.float32))
+    answer = client.post(f"/v1/scenes/{scene_id}/intersect", content=body.getvalue(),
+                         headers={"content-type": "application/x-npy"})
+    assert answer.status_code == 200, answer.text
+    metrics = dict(part.strip().split(";dur=") for part in
+                   answer.headers["server-timing"].split(","))
+    assert list(metrics) == ["body", "compute", "app"]
+    body_ms, compute_ms, app_ms = (float(metrics[name]) for name in metrics)
+    # the route's two parts lie within the app's time (each rounded to 0.1 ms)
+    assert min(body_ms, compute_ms) >= 0 and body_ms + compute_ms <= app_ms + 0.2

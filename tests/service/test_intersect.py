@@ -198,7 +198,7 @@ DIRECTIONS = [[0.0, 0.0, 1.0]]
     ({"origins": [[0.0, 0.0]], "directions": DIRECTIONS}, "origins.0"),
     ({"origins": ORIGINS, "directions": [[0, 0, 1], [0, 0, 1]]}, "directions"),
     ({"origins": ORIGINS, "directions": [[0.0, 0.0, 0.0]]}, "non-zero"),
-    ({"origins": ORIGINS}, "directions: Field required"),
+    ({"origins": ORIGINS}, "origins and directions go together"),
     ({"origins": ORIGINS, "directions": DIRECTIONS, "query": "nearest"}, "query"),
     ({"origins": ORIGINS, "directions": DIRECTIONS, "tmin": [0.0, 1.0]}, "tmin"),
     ({"origins": ORIGINS, "directions": DIRECTIONS, "colour": 1}, "colour"),
