@@ -1,8 +1,8 @@
 """An 8-wide slab test in one go: explicit LLVM vector code for Numba.
 
 LLVM does not vectorise an 8-iteration loop on its own (too short a trip count), so the test of
-a wide node's eight child boxes is written as a Numba intrinsic over ``<8 x float>`` vectors
-(``<8 x double>`` for float64 rays): eight boxes cost about as much as one scalar box test.
+a wide node's eight child boxes is written as a Numba intrinsic over ``<8 x float>`` vectors,
+for rays of either precision: eight boxes cost about as much as one scalar box test.
 """
 
 from llvmlite import ir
@@ -24,57 +24,56 @@ def _splat(builder, vector, value):
 
 
 @intrinsic
-def enter8(typingctx, nodes, row, ox, oy, oz, ix, iy, iz, fx, fy, fz, tmin, tmax, entry):
-    """Test a ray against the eight child boxes of wide node ``row``.
+def enter8(typingctx, nodes, row, ray, tmin, tmax, entry):
+    """Test a ray against the eight child boxes of wide node ``row``, in float32.
 
     ``nodes[row, 0:48]`` holds the boxes as six runs of eight float32 (lo x, y, z, hi x, y, z);
-    ``ix..iz`` are the reciprocal direction for near planes and ``fx..fz`` the padded one for far
-    planes, as in ``traverse._ray_setup``.  The same NaN-safe, conservative test as the scalar
-    one: a NaN slab distance (0·inf) never narrows the interval.
+    ``ray`` is ``traverse._box_ray``'s: the origin for near planes and for far planes, the
+    reciprocal direction, and the reciprocal padded for far planes, each (x, y, z) in float32.
+    ``tmin`` and ``tmax`` are float32 bounds at or outside the ray's.  The same NaN-safe,
+    conservative test as the scalar one: a NaN slab distance (0·inf) never narrows the interval.
 
     Returns
     -------
     int64
-        Bit j set when the ray enters child j within [tmin, tmax]; ``entry[0:8]`` receives the
-        entry distances (meaningful where the bit is set).
+        Bit j set when the ray enters child j within [tmin, tmax]; ``entry[0:8]`` (float32 or
+        float64) receives the entry distances (meaningful where the bit is set).
     """
-    real = ox
-    sig = types.int64(nodes, row, ox, oy, oz, ix, iy, iz, fx, fy, fz, tmin, tmax, entry)
+    sig = types.int64(nodes, row, ray, tmin, tmax, entry)
 
     def codegen(context, builder, signature, args):
-        nodes_v, row_v, *ray, entry_v = args
-        ox_v, oy_v, oz_v, ix_v, iy_v, iz_v, fx_v, fy_v, fz_v, tmin_v, tmax_v = ray
+        nodes_v, row_v, ray_v, tmin_v, tmax_v, entry_v = args
         table = context.make_array(signature.args[0])(context, builder, nodes_v)
         start = cgutils.get_item_pointer(context, builder, signature.args[0], table,
                                          [row_v, ir.Constant(ir.IntType(64), 0)])
-        lanes = ir.VectorType(ir.FloatType(), WIDTH)
-        first = builder.bitcast(start, lanes.as_pointer())
+        vector = ir.VectorType(ir.FloatType(), WIDTH)
+        first = builder.bitcast(start, vector.as_pointer())
         planes = [builder.load(builder.gep(first, [ir.Constant(ir.IntType(64), k)]), align=4)
                   for k in range(6)]
-        scalar = context.get_value_type(real)
-        vector = ir.VectorType(scalar, WIDTH)
-        if real == types.float64:
-            planes = [builder.fpext(plane, vector) for plane in planes]
+        values = [builder.extract_value(ray_v, k) for k in range(12)]
+        near_origin, far_origin, reciprocal, padded = (values[k:k + 3] for k in range(0, 12, 3))
 
         def splat(value):
             return _splat(builder, vector, value)
 
-        zero = ir.Constant(scalar, 0.0)
+        zero = ir.Constant(ir.FloatType(), 0.0)
         t_near = splat(tmin_v)
         t_far = splat(tmax_v)
-        for axis, (o, i, f) in enumerate(((ox_v, ix_v, fx_v), (oy_v, iy_v, fy_v),
-                                          (oz_v, iz_v, fz_v))):
-            forward = builder.fcmp_ordered(">=", i, zero)
+        for axis in range(3):
+            forward = builder.fcmp_ordered(">=", reciprocal[axis], zero)
             near = builder.select(forward, planes[axis], planes[axis + 3])
             far = builder.select(forward, planes[axis + 3], planes[axis])
-            origin = splat(o)
-            t = builder.fmul(builder.fsub(near, origin), splat(i))
+            t = builder.fmul(builder.fsub(near, splat(near_origin[axis])),
+                             splat(reciprocal[axis]))
             t_near = builder.select(builder.fcmp_ordered(">", t, t_near), t, t_near)
-            t = builder.fmul(builder.fsub(far, origin), splat(f))
+            t = builder.fmul(builder.fsub(far, splat(far_origin[axis])), splat(padded[axis]))
             t_far = builder.select(builder.fcmp_ordered("<", t, t_far), t, t_far)
         hit = builder.fcmp_ordered("<=", t_near, t_far)
-        out = context.make_array(signature.args[13])(context, builder, entry_v)
-        builder.store(t_near, builder.bitcast(out.data, vector.as_pointer()), align=4)
+        out = context.make_array(signature.args[5])(context, builder, entry_v)
+        stored = ir.VectorType(context.get_value_type(signature.args[5].dtype), WIDTH)
+        if stored != vector:
+            t_near = builder.fpext(t_near, stored)
+        builder.store(t_near, builder.bitcast(out.data, stored.as_pointer()), align=4)
         return builder.zext(builder.bitcast(hit, ir.IntType(WIDTH)), ir.IntType(64))
 
     return sig, codegen

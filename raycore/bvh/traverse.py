@@ -14,8 +14,10 @@ mesh took 51 thread-ns instead of 15.  Helpers that loop are ordinary compiled c
 once; only the small ones are inlined.
 
 Robustness (DESIGN.md, "Numerics"): a watertight triangle test behind a plain slab test still
-leaks, so the box test is conservative (Ize 2013: the far distance is scaled by 1 + 2γ(n)) and
-NaN-safe (a 0·inf slab distance, from a ray lying in a face plane, never narrows the interval).
+leaks, so the box test is conservative (Ize 2013: the far distance is scaled by 1 + 2γ(n), and
+the ray's bounds widened alike) and NaN-safe (a 0·inf slab distance, from a ray lying in a face
+plane, never narrows the interval).  It runs in float32 for rays of either precision, with a
+float64 ray's origin rounded outwards (:func:`_box_ray`).
 """
 
 import numpy as np
@@ -85,24 +87,78 @@ def _line_rows(threads, count, dtype):
     return memory[start:start + threads * stride].reshape(threads, stride)
 
 
-@njit(cache=True, forceinline=True, error_model="numpy")
-def _ray_setup(ox, dx, dy, dz):
-    """Reciprocal direction for near planes, and padded for far planes.
+@njit(cache=True, forceinline=True)
+def _below32(x):
+    """A float32 at most ``x``, at most two float32 ulps below it (``x`` itself for a float32).
 
-    The far distance is padded by 1 + 2γ(5): the γ(3) of Ize's analysis for the reciprocal, the
-    subtraction and the product, plus two roundings for folding the pad into the reciprocal.
+    Without a branch or a library call (``np.nextafter`` is one): one ulp of a float32 r is at
+    most |r|·2^-23, or 2^-149 below the normal range, so r less that much is below ``x``."""
+    r = np.float32(x)
+    return r if r <= x else r - (abs(r) * np.float32(2**-23) + np.float32(2**-149))
+
+
+@njit(cache=True, forceinline=True)
+def _above32(x):
+    """A float32 at least ``x``, at most two float32 ulps above it (as :func:`_below32`)."""
+    r = np.float32(x)
+    return r if r >= x else r + (abs(r) * np.float32(2**-23) + np.float32(2**-149))
+
+
+@njit(cache=True, forceinline=True)
+def _bounds32(tmin, tmax):
+    """The ray's bounds as the float32 box test takes them: rounded outwards to float32 and
+    widened by 2γ(6) of themselves.  The test's near distance may exceed the exact one by a
+    factor 1 + γ(6) (see :func:`_box_ray`); Ize's analysis pads the far distance for that, and a
+    bound needs it too: a box entered exactly at tmax (a ray that ends on a face) was missed."""
+    slack = np.float32(2) * gamma(6, np.float32(0))
+    lo = _below32(tmin)
+    hi = _above32(tmax)
+    return lo - abs(lo) * slack, hi + abs(hi) * slack
+
+
+@njit(cache=True, forceinline=True, error_model="numpy")
+def _box_ray(ox, oy, oz, dx, dy, dz):
+    """The ray as the float32 box test takes it (:func:`~raycore.bvh.simd.enter8`): per axis, the
+    origin for near planes and for far planes, the reciprocal direction, and the reciprocal
+    padded for far planes.
+
+    Boxes are float32, and so is the test for rays of either precision: eight float64 lanes cost
+    twice what eight float32 ones do.  A float64 origin is rounded outwards, to the float32 on
+    the side that moves each slab distance the safe way (near distances down, far ones up), so
+    that the rounded origin adds no error.  The far distance is then padded by 1 + 2γ(5) in
+    float32: the γ(3) of Ize's analysis for the reciprocal, the subtraction and the product,
+    plus two roundings for folding the pad into the reciprocal; a float64 ray's reciprocal is
+    rounded once more, to float32, and takes γ(6).
+
+    Returns
+    -------
+    tuple of 12 float32
+        Near-plane origin (x, y, z), far-plane origin, reciprocal, padded reciprocal.
     """
-    ix = like(ox, 1) / dx
-    iy = like(ox, 1) / dy
-    iz = like(ox, 1) / dz
-    pad = like(ox, 1) + like(ox, 2) * gamma(5, ox)
-    return ix, iy, iz, ix * pad, iy * pad, iz * pad
+    wide = unit_roundoff(ox) < unit_roundoff(np.float32(0))  # float64 rays
+    pad = np.float32(1) + np.float32(2) * gamma(5 + wide, np.float32(0))
+    ix = np.float32(like(ox, 1) / dx)
+    iy = np.float32(like(ox, 1) / dy)
+    iz = np.float32(like(ox, 1) / dz)
+    nx, ny, nz = fx, fy, fz = np.float32(ox), np.float32(oy), np.float32(oz)
+    if wide:
+        # forward along an axis (reciprocal >= 0, as enter8 decides): the near plane is the
+        # box's low one, whose distance shrinks with the origin rounded up; backward, the
+        # other way round
+        nx = _above32(ox) if ix >= 0 else _below32(ox)
+        ny = _above32(oy) if iy >= 0 else _below32(oy)
+        nz = _above32(oz) if iz >= 0 else _below32(oz)
+        fx = _below32(ox) if ix >= 0 else _above32(ox)
+        fy = _below32(oy) if iy >= 0 else _above32(oy)
+        fz = _below32(oz) if iz >= 0 else _above32(oz)
+    return (nx, ny, nz, fx, fy, fz, ix, iy, iz, ix * pad, iy * pad, iz * pad)
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _descend(nodes, refs, row, row_base, ox, oy, oz, ix, iy, iz, fx, fy, fz, tmin, tmax, stack,
-             stack_t, top, entry, leaf_first, leaf_count, ordered):
-    """Test the ray against the children of wide node ``row``.
+def _descend(nodes, refs, row, row_base, box, lo, hi, stack, stack_t, top, entry, leaf_first,
+             leaf_count, ordered):
+    """Test the ray (``box``, with float32 bounds ``lo``, ``hi`` from :func:`_bounds32`) against
+    the children of wide node ``row``.
 
     Entered internal children go on the stack, and the last pushed is returned as the next row
     (-1 if none); entered leaves are listed in ``leaf_first`` / ``leaf_count``.  When
@@ -114,7 +170,7 @@ def _descend(nodes, refs, row, row_base, ox, oy, oz, ix, iy, iz, fx, fy, fz, tmi
     -------
     next_row, top, leaves
     """
-    mask = enter8(nodes, row, ox, oy, oz, ix, iy, iz, fx, fy, fz, tmin, tmax, entry)
+    mask = enter8(nodes, row, box, lo, hi, entry)
     leaves = 0
     base = top
     while mask:
@@ -193,20 +249,21 @@ def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj
     entry = real_row[:WIDTH]
     lanes = real_row[WIDTH:WIDTH + 3 * LANES]
     stack_t = real_row[WIDTH + 3 * LANES + STACK_SIZE:REAL_FIXED]
-    ix, iy, iz, fx, fy, fz = _ray_setup(ox, dx, dy, dz)
+    box = _box_ray(ox, oy, oz, dx, dy, dz)
     # the watertight set-up waits for the first leaf: most rays that miss never reach one
     sheared = False
     kx = ky = kz = 0
     sx = sy = sz = like(ox, 0)
     best_t = tmax
+    # the box test's bounds, updated with best_t (rarely), not at every node
+    lo, hi = _bounds32(tmin, best_t)
     best_slot = -1
     best_u = best_v = like(ox, 0)
     top = 0
     row = root
     while row >= 0:
-        next_row, top, leaves = _descend(nodes, refs, row, root, ox, oy, oz, ix, iy, iz, fx, fy,
-                                         fz, tmin, best_t, stack, stack_t, top, entry,
-                                         leaf_first, leaf_count, mode == CLOSEST)
+        next_row, top, leaves = _descend(nodes, refs, row, root, box, lo, hi, stack, stack_t,
+                                         top, entry, leaf_first, leaf_count, mode == CLOSEST)
         if leaves and not sheared:
             kx, ky, kz, sx, sy, sz = watertight_setup(dx, dy, dz)
             sheared = True
@@ -246,6 +303,7 @@ def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj
                         continue
                     if t <= best_t:
                         best_t = t
+                        lo, hi = _bounds32(tmin, best_t)
                         best_slot = LANES * block + lane
                         best_u = lanes[LANES + lane]
                         best_v = lanes[2 * LANES + lane]
@@ -316,7 +374,7 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
             scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, best_t, scene.mesh_of[direct[0]],
             direct[0], int_row, real_row, hit_t, hit_obj, hit_prim, found)
         return t, direct[0] if p >= 0 else -1, p, u, v, found
-    ix, iy, iz, fx, fy, fz = _ray_setup(ox, dx, dy, dz)
+    box = _box_ray(ox, oy, oz, dx, dy, dz)
     # The direct objects live outside the top-level BVH; they are processed first, as a leaf of
     # their own, so that they can shorten the ray before traversal.
     in_top = False
@@ -368,9 +426,10 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
             row, top = _pop(stack, stack_t, top, best_t)
             if row < 0:
                 break
-        next_row, top, leaves = _descend(top_nodes, scene.top_refs, row, 0, ox, oy, oz, ix, iy,
-                                         iz, fx, fy, fz, tmin, best_t, stack, stack_t, top, entry,
-                                         leaf_first, leaf_count, mode == CLOSEST)
+        lo, hi = _bounds32(tmin, best_t)
+        next_row, top, leaves = _descend(top_nodes, scene.top_refs, row, 0, box, lo, hi, stack,
+                                         stack_t, top, entry, leaf_first, leaf_count,
+                                         mode == CLOSEST)
     return best_t, best_obj, best_prim, best_u, best_v, found
 
 
