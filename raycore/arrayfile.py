@@ -41,8 +41,13 @@ def _aligned(offset):
     return -(-offset // ALIGN) * ALIGN
 
 
+def _bytes(array):
+    """The array's memory as a flat uint8 array (no copy for a C-contiguous one)."""
+    return np.ascontiguousarray(array).reshape(-1).view(np.uint8)
+
+
 def _crc(array):
-    return zlib.crc32(memoryview(np.ascontiguousarray(array)).cast("B"))
+    return zlib.crc32(_bytes(array))
 
 
 def encode(meta, arrays):
@@ -73,7 +78,7 @@ def encode(meta, arrays):
     start = _aligned(position)
     for entry, array in zip(entries, arrays.values(), strict=True):
         yield bytes(start + entry["offset"] - position)
-        data = memoryview(np.ascontiguousarray(array)).cast("B")
+        data = _bytes(array)
         yield data
         position = start + entry["offset"] + len(data)
     yield bytes(start + offset - position)
