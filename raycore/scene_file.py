@@ -168,7 +168,7 @@ def _restore(Scene, meta, arrays):
         slot_face = take(f"mesh{i}.slot_face", np.int32, (LANES * len(blocks),))
         _within(slot_face, -1, len(mesh.faces), f"mesh {i}'s face indices")
         bvh = _bvh(take, f"mesh{i}", stats, None)
-        _checked_tree(bvh.nodes, len(blocks), lambda count: -(-count // LANES), f"mesh {i}")
+        _checked_tree(bvh.nodes, len(blocks), LANES, f"mesh {i}")
         mesh.restore(bvh, blocks, slot_face, dtype, scene.build_params, stats["build_seconds"])
         scene._meshes.append(mesh)
 
@@ -184,7 +184,7 @@ def _restore(Scene, meta, arrays):
         # the tree is over the bounded objects: those in its slots, or the lone one
         scene._top = _bvh(take, "top", meta["top"], len(top_slots) or 1)
         if len(top_slots):
-            _checked_tree(scene._top.nodes, len(top_slots), lambda count: count, "the top tree")
+            _checked_tree(scene._top.nodes, len(top_slots), 1, "the top tree")
     elif len(top_slots):
         raise ValueError("the scene file is corrupt (top-tree objects without a top tree)")
 
@@ -200,8 +200,8 @@ def _restore(Scene, meta, arrays):
     return scene
 
 
-def _checked_tree(nodes, leaf_limit, per_leaf, name):
+def _checked_tree(nodes, leaf_limit, blocks, name):
     try:
-        check_tree(nodes, leaf_limit, per_leaf, name)
+        check_tree(nodes, leaf_limit, blocks, name)
     except ValueError as error:
         raise ValueError(f"the scene file is corrupt ({error})") from error

@@ -7,12 +7,13 @@ would read out of bounds or overflow the stack (a crash, or a wrong answer).
 """
 
 import numpy as np
+from numba import njit
 
 from raycore.bvh.build import MAX_DEPTH
 from raycore.bvh.layout import COUNTS, NODE_WIDTH, REFS, WIDTH
 
 
-def check_tree(nodes, leaf_limit, per_leaf, name):
+def check_tree(nodes, leaf_limit, blocks, name):
     """Raise ``ValueError`` unless ``nodes`` is a wide BVH that the traversal can follow safely.
 
     Parameters
@@ -20,10 +21,10 @@ def check_tree(nodes, leaf_limit, per_leaf, name):
     nodes : ndarray of float32, shape (K, NODE_WIDTH)
         Wide rows (:mod:`raycore.bvh.layout`), row 0 the root.
     leaf_limit : int
-        Leaves reference items ``ref .. ref + per_leaf(count) - 1``, all below this.
-    per_leaf : callable
-        Items a leaf of ``count`` (an int64 array) occupies: ``count`` objects of a top-level
-        tree, ``ceil(count / 4)`` blocks of a mesh's.
+        Leaves reference items ``ref .. ref + ceil(count / blocks) - 1``, all below this.
+    blocks : int
+        Primitives per item a leaf references: 1 for a top-level tree's objects, LANES for a
+        mesh's blocks of triangles.
     name : str
         What the tree is, for the message.
 
@@ -34,37 +35,52 @@ def check_tree(nodes, leaf_limit, per_leaf, name):
     (empty box, no reference), since a reference of 0 there would be the root again.
     """
     if nodes.dtype != np.float32 or nodes.ndim != 2 or nodes.shape[1] != NODE_WIDTH or \
-            len(nodes) == 0:
+            len(nodes) == 0 or not nodes.flags.c_contiguous:
         raise ValueError(f"{name}: nodes must be a non-empty (K, {NODE_WIDTH}) float32 array")
-    refs = nodes.view(np.int32)
-    counts = refs[:, COUNTS:COUNTS + WIDTH].astype(np.int64)
-    firsts = refs[:, REFS:REFS + WIDTH].astype(np.int64)
-    boxes = nodes[:, :6 * WIDTH].reshape(len(nodes), 6, WIDTH)
-    unused = np.all(boxes[:, :3] == np.inf, axis=1) & np.all(boxes[:, 3:] == -np.inf, axis=1) \
-        & (counts == 0) & (firsts == 0)
-    if np.any(counts < 0):
-        raise ValueError(f"{name}: a node has a negative count")
-    leaf = counts > 0
-    if np.any(leaf):
-        last = firsts[leaf] + per_leaf(counts[leaf])
-        if firsts[leaf].min() < 0 or last.max() > leaf_limit:
-            raise ValueError(f"{name}: a leaf references items outside [0, {leaf_limit})")
-    internal = ~leaf & ~unused
-    parent = np.broadcast_to(np.arange(len(nodes))[:, None], internal.shape)[internal]
-    child = firsts[internal]
-    if np.any(child <= parent) or np.any(child >= len(nodes)):
-        raise ValueError(f"{name}: a node references a row that is not a later one")
-    if not np.array_equal(np.bincount(child, minlength=len(nodes)),
-                          np.r_[0, np.ones(len(nodes) - 1, np.int64)]):
-        raise ValueError(f"{name}: its rows do not form one tree")
-    # each pass settles one more level (after pass k, a row deeper than k reads k), so MAX_DEPTH
-    # passes tell whether some row is MAX_DEPTH deep: the stack holds (WIDTH - 1) per level
-    depth = np.zeros(len(nodes), np.int64)
-    for _ in range(MAX_DEPTH):
-        updated = depth.copy()
-        updated[child] = depth[parent] + 1
-        if np.array_equal(updated, depth):
-            break
-        depth = updated
-    if depth.max() >= MAX_DEPTH:
-        raise ValueError(f"{name}: deeper than {MAX_DEPTH} levels")
+    problem = _tree_problem(nodes, nodes.view(np.int32), leaf_limit, blocks)
+    if problem:
+        raise ValueError(f"{name}: {_PROBLEMS[problem].format(limit=leaf_limit)}")
+
+
+_PROBLEMS = {
+    1: "a node has a negative count",
+    2: "a leaf references items outside [0, {limit})",
+    3: "a node references a row that is not a later one",
+    4: "its rows do not form one tree",
+    5: f"deeper than {MAX_DEPTH} levels",
+}
+
+
+@njit(cache=True)
+def _tree_problem(nodes, refs, leaf_limit, blocks):
+    """0, or the key in _PROBLEMS of the first problem found (one pass over the rows: a child
+    is a later row, so its parent's depth is known when it is reached)."""
+    depth = np.full(len(nodes), -1, np.int64)
+    depth[0] = 0
+    for row in range(len(nodes)):
+        if depth[row] < 0:  # no parent reached it
+            return 4
+        if depth[row] >= MAX_DEPTH:
+            return 5
+        for slot in range(WIDTH):
+            count = np.int64(refs[row, COUNTS + slot])
+            ref = np.int64(refs[row, REFS + slot])
+            if count < 0:
+                return 1
+            if count > 0:
+                items = (count + blocks - 1) // blocks
+                if ref < 0 or ref + items > leaf_limit:
+                    return 2
+                continue
+            unused = ref == 0
+            for axis in range(3):
+                unused &= nodes[row, axis * WIDTH + slot] == np.inf
+                unused &= nodes[row, (axis + 3) * WIDTH + slot] == -np.inf
+            if unused:
+                continue
+            if ref <= row or ref >= len(nodes):
+                return 3
+            if depth[ref] >= 0:  # a second parent
+                return 4
+            depth[ref] = depth[row] + 1
+    return 0
