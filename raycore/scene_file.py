@@ -38,8 +38,12 @@ def _tree(bvh, prefix, arrays):
     return {name: getattr(bvh, name) for name in _TREE_STATS}
 
 
-def contents(scene):
-    """``(meta, arrays)`` of a built scene, for :func:`raycore.arrayfile.encode`."""
+def contents(scene, extra=None):
+    """``(meta, arrays)`` of a built scene, for :func:`raycore.arrayfile.encode`.
+
+    ``extra``, ``(meta, arrays)`` of the caller's own (e.g. the service's colours), is kept
+    beside the scene: under ``meta["extra"]`` and arrays named ``extra.<name>``.
+    """
     scene._scene()
     placed = sorted(scene._placement)
     arrays = {
@@ -73,12 +77,16 @@ def contents(scene):
                       "intersection_cost": params.intersection_cost},
             "top": None if scene._top is None else _tree(scene._top, "top", arrays),
             "build_seconds": scene.build_seconds}
+    if extra is not None:
+        meta["extra"] = extra[0]
+        arrays.update({f"extra.{name}": array for name, array in extra[1].items()})
     return meta, arrays
 
 
-def save(scene, path):
-    """Write a scene (built first if it is not) to ``path``, atomically."""
-    arrayfile.write(path, *contents(scene))
+def save(scene, path, extra=None):
+    """Write a scene (built first if it is not) to ``path``, atomically; ``extra`` as in
+    :func:`contents`."""
+    arrayfile.write(path, *contents(scene, extra))
 
 
 def dumps(scene):
@@ -91,13 +99,22 @@ def dumps(scene):
 
 def load(source, *, mmap=False):
     """A built Scene from a file :func:`save` wrote (or its bytes); see ``Scene.load``."""
+    return load_with_extra(source, mmap=mmap)[0]
+
+
+def load_with_extra(source, *, mmap=False):
+    """``(scene, extra_meta, extra_arrays)`` from a file :func:`save` wrote with ``extra``
+    (None and {} without)."""
     from raycore.scene import Scene
 
     meta, arrays = arrayfile.read(source, mmap=mmap)
     try:
-        return _restore(Scene, meta, arrays)
+        scene = _restore(Scene, meta, arrays)
     except (KeyError, TypeError, AttributeError) as error:
         raise ValueError(f"the scene file is corrupt (missing or malformed {error})") from error
+    extra = {name[len("extra."):]: array for name, array in arrays.items()
+             if name.startswith("extra.")}
+    return scene, meta.get("extra"), extra
 
 
 class _Arrays:
