@@ -189,7 +189,9 @@ def _parse(raw):
         arrays[name] = array
         data = _bytes(array)
         pieces += [(name, data[i * CHUNK:(i + 1) * CHUNK], crc) for i, crc in enumerate(crcs)]
-    threads = min(len(pieces) // 2, os.cpu_count() or 1)  # starting threads costs ~0.1 ms each
+    # threads only for files of several pieces: starting them costs more than a small file's
+    # checksums
+    threads = min(sum(len(piece[1]) for piece in pieces) // CHUNK, os.cpu_count() or 1)
     with ThreadPoolExecutor(threads) if threads > 1 else nullcontext() as pool:
         found = (pool or builtins).map(lambda piece: zlib.crc32(piece[1]), pieces)
         for (name, _, crc), value in zip(pieces, found, strict=True):
