@@ -68,6 +68,7 @@ class DataDir:
         path = self._path(kind, key)
         if _touch(path):
             return False
+        path.parent.mkdir(parents=True, exist_ok=True)  # the directory may have been emptied
         if kind == "mesh":
             arrayfile.write(path, {"info": entry.info.model_dump(mode="json")},
                             {"vertices": entry.vertices, "faces": entry.faces})
@@ -107,6 +108,9 @@ class DataDir:
             logger.warning("removing unreadable %s file %s: %s", kind, path, error)
             path.unlink(missing_ok=True)
             return None
+        except OSError as error:  # the disk, not the file (permissions, I/O): leave it there
+            logger.warning("cannot read %s file %s: %s", kind, path, error)
+            return None
         _touch(path)
         return loaded
 
@@ -134,14 +138,17 @@ class DataDir:
         """``(path, bytes, modification time)`` of every stored file (not temporaries)."""
         found = []
         for folder in _FOLDERS.values():
-            with os.scandir(self.root / folder) as entries:
-                for entry in entries:
-                    if entry.name.endswith(_SUFFIX) and _ID.fullmatch(entry.name[:-len(_SUFFIX)]):
-                        try:
-                            stat = entry.stat()
-                        except FileNotFoundError:  # removed by another worker meanwhile
-                            continue
-                        found.append((Path(entry.path), stat.st_size, stat.st_mtime))
+            try:
+                entries = list(os.scandir(self.root / folder))
+            except FileNotFoundError:  # the directory was emptied: nothing stored
+                continue
+            for entry in entries:
+                if entry.name.endswith(_SUFFIX) and _ID.fullmatch(entry.name[:-len(_SUFFIX)]):
+                    try:
+                        stat = entry.stat()
+                    except FileNotFoundError:  # removed by another worker meanwhile
+                        continue
+                    found.append((Path(entry.path), stat.st_size, stat.st_mtime))
         return found
 
     def _evict(self, keep):

@@ -5,6 +5,7 @@ disk budget evicts the least recently used files."""
 import dataclasses
 import logging
 import os
+import shutil
 import time
 
 import numpy as np
@@ -115,6 +116,19 @@ def test_corrupt_files_are_logged_removed_and_absent(tmp_path, caplog, how):
         assert uploaded_spec(second)[0] == mesh_id
         assert second.post("/v1/scenes", json=spec).status_code == 201
         assert len(intersect(second, scene_id)["t"]) == 300
+
+
+def test_a_data_directory_emptied_under_a_running_service(tmp_path):
+    with app_on(tmp_path) as client:
+        mesh_id, spec = uploaded_spec(client)
+        for folder in ("meshes", "scenes"):
+            shutil.rmtree(tmp_path / folder)
+        assert client.get("/v1/meshes").json()["total"] == 1  # still in this worker's memory
+        assert client.delete(f"/v1/meshes/{mesh_id}").status_code == 204
+        assert client.get(f"/v1/meshes/{mesh_id}").status_code == 404
+        assert uploaded_spec(client)[0] == mesh_id
+        assert client.post("/v1/scenes", json=spec).status_code == 201
+        assert len(files(tmp_path)) == 2
 
 
 def test_ids_that_are_not_content_ids_never_reach_the_file_system(tmp_path):
