@@ -747,7 +747,10 @@ def test_compose_workers(container, work):
                                  connection=connection)
         if status != 200 or decode_png(png) != (64, 48):
             raise TestFailed(f"the demo render answered {status}: {png[:300]!r}")
-        spec = {"objects": [{"type": "sphere", "center": [0, 0, 0], "radius": 1}]}
+        # a mesh beside the sphere: the restart below reads trees back from the volume
+        spec = {"objects": [{"type": "sphere", "center": [0, 0, 0], "radius": 1},
+                            {"type": "mesh", "vertices": [[0, 0, 9], [1, 0, 9], [0, 1, 9]],
+                             "faces": [[0, 1, 2]]}]}
         status, _, body = request(server.url, "POST", "/v1/scenes", json.dumps(spec).encode(),
                                   "application/json", connection=connection)
         if status not in (200, 201):
