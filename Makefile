@@ -42,6 +42,7 @@ PYTHON313 ?= $(or $(shell python3.13 -c 'import sys; print(sys.executable)' 2>/d
 PY313_TESTS ?= tests/scene tests/bvh tests/service tests/test_camera.py tests/test_sensors.py tests/test_offset.py \
 	tests/test_render.py tests/test_threading.py tests/test_info.py tests/test_compile_notice.py tests/test_warmup.py \
 	tests/test_ray_bounds.py tests/commands tests/integrations/test_trimesh.py \
+	tests/integrations/test_dask.py \
 	--ignore tests/service/test_schemathesis.py --ignore tests/service/test_fuzz.py
 test-py313:
 	@test -n "$(PYTHON313)" || (echo "test-py313 needs Python 3.13 (python3.13, or pyenv's)"; exit 2)
@@ -70,6 +71,8 @@ bench: $(VENV)/.bench-installed
 	$(BIN)/python -m benchmarks.run $(BENCH_ARGS)
 	$(BIN)/python -m benchmarks.latency $(filter --quick,$(BENCH_ARGS))
 	$(BIN)/python -m benchmarks.service_bench $(filter --quick,$(BENCH_ARGS))
+	$(BIN)/python -m benchmarks.scene_file $(filter --no-large,$(BENCH_ARGS))
+	$(BIN)/python -m benchmarks.dask_bench
 
 # docs/speed-vs-accuracy.png and docs/model-what-you-need.png with their Markdown tables
 # (benchmarks/speed_accuracy.py).  The error figures come from tests/stability's catalogue and

@@ -703,8 +703,12 @@ def compose_environment(container):
                and name[len("RAYCORE_"):].lower() not in parsed["settings"]]
     if unknown:
         raise TestFailed(f"compose.yaml sets {unknown}, which the service does not read")
+    mounted = [str(volume).split(":")[1] for volume in service.get("volumes", [])]
+    if environment.get("RAYCORE_DATA_DIR") not in mounted:
+        raise TestFailed(f"compose.yaml mounts {mounted}, not a volume at RAYCORE_DATA_DIR "
+                         f"({environment.get('RAYCORE_DATA_DIR')})")
     passed("compose.yaml builds docker/Dockerfile, publishes the image's port, sets only "
-           "settings the service reads")
+           "settings the service reads, mounts a volume at RAYCORE_DATA_DIR")
     return environment
 
 
@@ -714,6 +718,11 @@ def test_compose_workers(container, work):
         " ".join(f"{name}={value}" for name, value in environment.items()))
     cache_dir = numba_cache_dir(container.config)
     before = container.snapshot(cache_dir)
+    # the volume: a directory of the host's, as a container engine mounts one
+    volume = work / "volume"
+    volume.mkdir()
+    os.chown(volume, 10001, 10001)
+    container._mount(["--bind", str(volume)], environment["RAYCORE_DATA_DIR"].lstrip("/"))
     server = Server(container, environment, work / "server-compose.log")
     try:
         startup = server.wait_healthy()
@@ -738,7 +747,10 @@ def test_compose_workers(container, work):
                                  connection=connection)
         if status != 200 or decode_png(png) != (64, 48):
             raise TestFailed(f"the demo render answered {status}: {png[:300]!r}")
-        spec = {"objects": [{"type": "sphere", "center": [0, 0, 0], "radius": 1}]}
+        # a mesh beside the sphere: the restart below reads trees back from the volume
+        spec = {"objects": [{"type": "sphere", "center": [0, 0, 0], "radius": 1},
+                            {"type": "mesh", "vertices": [[0, 0, 9], [1, 0, 9], [0, 1, 9]],
+                             "faces": [[0, 1, 2]]}]}
         status, _, body = request(server.url, "POST", "/v1/scenes", json.dumps(spec).encode(),
                                   "application/json", connection=connection)
         if status not in (200, 201):
@@ -759,9 +771,35 @@ def test_compose_workers(container, work):
     finally:
         code = server.stop()
     check_clean_stop(server, code)
+    stored = sorted(path.name for path in volume.rglob("*.rcf"))
+    if stored != [f"{scene}.rcf"]:
+        raise TestFailed(f"the volume holds {stored}, not the scene {scene}")
+    restarted_finds_scene(container, environment, work, scene)
     if container.snapshot(cache_dir) != before:
         raise TestFailed("with compose.yaml's environment the service compiled kernels")
     passed("with compose.yaml's environment too, Numba's cache is untouched")
+
+
+def restarted_finds_scene(container, environment, work, scene):
+    """The container started again on the same volume answers for ``scene`` on fresh
+    connections (each may reach either worker), without it being sent again."""
+    server = Server(container, environment, work / "server-restarted.log")
+    try:
+        server.wait_healthy()
+        rays = {"origins": [[0, 0, -5]], "directions": [[0, 0, 1]]}
+        for _ in range(6):
+            status, _, body = request(server.url, "POST", f"/v1/scenes/{scene}/intersect",
+                                      json.dumps(rays).encode(), "application/json")
+            if status != 200 or json.loads(body)["t"] != [4.0]:
+                raise TestFailed(f"after a restart, intersect answered {status}: {body[:300]!r}")
+        passed("restarted on the same volume, the service answers for its scene (6 of 6 fresh "
+               "connections)")
+    except BaseException:
+        print(server.output(), file=sys.stderr)
+        raise
+    finally:
+        code = server.stop()
+    check_clean_stop(server, code)
 
 
 def show_cold_start(container, work):

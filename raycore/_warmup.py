@@ -8,10 +8,11 @@ meshes only, with shapes only and with one object; each query with each triangle
 method and surface field; rays as contiguous arrays of either precision, as the (read-only,
 C- or Fortran-ordered) columns of a ray table, with scalar and per-ray bounds; batches of one
 ray, a few and thousands (kernels may take other paths by size); camera rays, every shading
-of a render, and ray origins offset from hits.
+of a render, ray origins offset from hits, and a scene read back from its file.
 """
 
 import math
+import pickle
 import time
 
 import numpy as np
@@ -55,6 +56,7 @@ def warm_up(dtypes=DTYPES, report=print):
         _ray_forms(everything)
         _renders(everything)
         _offsets(everything)
+        _loaded(everything)
         _large_build(dtype)
         report(f"raycore warmup: {dtype} kernels ready in {time.perf_counter() - began:.1f} s")
     return time.perf_counter() - started
@@ -223,6 +225,13 @@ def _renders(scene):
                 colors = np.linspace(0, 1, 3 * len(scene)).reshape(-1, 3)
                 render(scene, origins, directions, width, height, colors=colors,
                        background=np.array([10, 20, 30]))
+
+
+def _loaded(scene):
+    """A scene read back from its file (the service's data directory, Dask's workers): the
+    checks of its trees, and queries on arrays that live in the file's buffer."""
+    loaded = pickle.loads(pickle.dumps(scene))
+    loaded.intersect(*_rays(BATCH_SIZES[1], scene.dtype, seed=3), fields=SURFACE_FIELDS)
 
 
 def _offsets(scene):

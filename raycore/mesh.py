@@ -143,6 +143,13 @@ class Mesh:
         self.build_seconds = time.perf_counter() - start
         self._built_for = (dtype, params)
 
+    def restore(self, bvh, leaf_blocks, slot_face, dtype, params, build_seconds):
+        """Take a BVH built earlier for this mesh (by :meth:`build`, as
+        :mod:`raycore.scene_file` stored it) in place of building one."""
+        self.bvh, self.leaf_blocks, self.slot_face = bvh, leaf_blocks, slot_face
+        self.build_seconds = build_seconds
+        self._built_for = (dtype, params)
+
     @property
     def nbytes(self):
         """Bytes held for ray queries: the BVH, the leaf blocks and their face indices."""

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from raycore import queries
+from raycore import queries, scene_file
 from raycore.bvh.build import BuildParams
 from raycore.bvh.layout import NODE_WIDTH, build_bvh
 from raycore.bvh.record import SceneRecord
@@ -74,7 +74,9 @@ class Scene:
         self._placement = {}  # instance object -> (4x4 world-from-object matrix, world bounds)
         self._record = None  # SceneRecord of the built scene
         self._build_lock = threading.Lock()
-        self._top = None
+        self._top = None  # BVH over the bounded objects, once built
+        self._top_slots = None  # (S,) int64: the object in each of the top tree's leaf slots
+        self._direct = None  # (D,) int64: objects tested before the tree (unbounded, or lone)
         self.build_seconds = 0.0
 
     # ------------------------------------------------------------------ geometry
@@ -209,20 +211,26 @@ class Scene:
             self._top = build_bvh(lo[finite] - pad, hi[finite] + pad,
                                   BuildParams(bins=self.build_params.bins))
         if len(bounded) > 1:
-            top = (self._top.nodes, self._top.refs, bounded[self._top.order], visible[~finite])
+            self._top_slots, self._direct = bounded[self._top.order], visible[~finite]
         else:
             # A lone object is tested directly, like the planes: its own BVH or shape test culls
             # as well as a top-level box would, and a ray is spared a level of traversal.
-            empty = np.zeros((0, NODE_WIDTH), np.float32)
-            top = (empty, empty.view(np.int32), np.zeros(0, np.int64),
-                   np.concatenate([visible[~finite], bounded]))
+            self._top_slots = np.zeros(0, np.int64)
+            self._direct = np.concatenate([visible[~finite], bounded])
+        self._assemble()
+        self.build_seconds = time.perf_counter() - start
+        return self
 
+    def _assemble(self):
+        """Pack the built trees and the object tables into the record the kernels read (after
+        :meth:`build`, or after :func:`raycore.scene_file.load` restored what it built)."""
         dtype = self.dtype
         empty_nodes = np.zeros((0, NODE_WIDTH), np.float32)
+        top_nodes = self._top.nodes if len(self._top_slots) else empty_nodes
         mesh_nodes = _joined([m.bvh.nodes for m in self._meshes], empty_nodes)
         blocks = [m.leaf_blocks for m in self._meshes]
         self._record = SceneRecord(
-            *top,
+            top_nodes, top_nodes.view(np.int32), self._top_slots, self._direct,
             np.array(self._kind, np.int64), np.array(self._param_row, np.int64),
             np.array(self._mesh_of, np.int64), np.array(self._xform_row, np.int64),
             np.array(self._params, dtype=dtype).reshape(-1, analytic.PARAM_WIDTH),
@@ -232,8 +240,6 @@ class Scene:
             _joined([m.slot_face for m in self._meshes], np.zeros(0, np.int32)),
             _starts([len(m.bvh.nodes) for m in self._meshes]), _starts([len(b) for b in blocks]),
         )
-        self.build_seconds = time.perf_counter() - start
-        return self
 
     def _scene(self):
         """The built scene's record, built first if the scene changed (once, under a lock, when
@@ -376,6 +382,41 @@ class Scene:
             _, odd = queries.odd_crossings(scene, rays, WATERTIGHT, sphere.PRECISE)
             votes += odd
         return votes >= 2
+
+    # ------------------------------------------------------------------ files and pickling
+
+    def save(self, path):
+        """Write the built scene (built first if it changed) to one file at ``path``.
+
+        The file holds the geometry, the trees and every table queries read, so that
+        :meth:`load` skips the build; it is written to a temporary file, flushed and renamed,
+        so that ``path`` never holds half a scene.  The format (:mod:`raycore.scene_file`) is
+        a JSON header and aligned raw arrays with checksums; nothing in it is pickled.
+        """
+        scene_file.save(self, path)
+
+    @classmethod
+    def load(cls, path, *, mmap=False):
+        """Read a scene that :meth:`save` wrote, ready for queries (no build).
+
+        Parameters
+        ----------
+        path : str or path-like
+        mmap : bool
+            Map the file instead of reading it: its pages are read as queries touch them and
+            shared between processes that map the same file.
+
+        Raises
+        ------
+        ValueError
+            When the file is not a raycore scene file, is truncated or corrupt (a checksum, or
+            a reference a query would follow, is wrong), or has a newer format version.
+        """
+        return scene_file.load(path, mmap=mmap)
+
+    def __reduce__(self):
+        # one copy of every array, in the file format: a pickle is about the file's size
+        return scene_file.load, (scene_file.dumps(self),)
 
     # ------------------------------------------------------------------ interop
 

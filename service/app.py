@@ -18,6 +18,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from service.auth import require_api_key
 from service.config import Settings, load_settings
+from service.datadir import DataDir
 from service.demo import load_demo
 from service.errors import ClientError, validation_detail
 from service.methods import Methods
@@ -86,7 +87,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app = FastAPI(title="raycore", version=version("raycore"),
                   description=DESCRIPTION + (KEY_DESCRIPTION if keyed else ""),
                   lifespan=_lifespan)
-    app.state.runtime = Runtime(settings, Store(settings.store_bytes))
+    disk = None if settings.data_dir is None else DataDir(settings.data_dir, settings.data_bytes)
+    app.state.runtime = Runtime(settings, Store(settings.store_bytes), disk)
     app.add_middleware(Methods)
     app.add_middleware(BodyLimit, max_bytes=settings.max_body_bytes,
                        seconds=settings.body_seconds)

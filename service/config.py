@@ -39,6 +39,12 @@ class Settings:
     api_key : str or None
         When set, uploads, scene builds and deletions need it (``X-API-Key`` or
         ``Authorization: Bearer``) and are answered 401 without it.  Not shown by ``repr``.
+    data_dir : str or None
+        When set, a directory where every uploaded mesh and built scene is written before it is
+        acknowledged, and where a worker looks before answering 404 (:mod:`service.datadir`):
+        restarts, workers and replicas that share it lose nothing.
+    data_bytes : int
+        Disk budget of ``data_dir``; least recently used files go first.
     """
 
     max_rays: int = 2**21
@@ -50,6 +56,8 @@ class Settings:
     body_seconds: int = 60
     demo: bool = True
     api_key: str | None = dataclasses.field(default=None, repr=False)
+    data_dir: str | None = None
+    data_bytes: int = 16 * 1024 * MIB
 
 
 def load_settings(environ=None):
@@ -64,7 +72,7 @@ def load_settings(environ=None):
     ------
     ValueError
         Naming the variable whose value is not a positive integer (or a boolean for ``DEMO``,
-        or a non-empty string for ``API_KEY``).
+        or a non-empty string for ``API_KEY`` and ``DATA_DIR``).
     """
     environ = os.environ if environ is None else environ
     values = {}
@@ -77,6 +85,11 @@ def load_settings(environ=None):
                 # refused rather than read as "no key": a blank secret would open the service
                 raise ValueError(f"{name} must not be empty (unset it to need no key)")
             values[field.name] = environ[name].strip()
+            continue
+        if field.name == "data_dir":
+            if not environ[name].strip():
+                raise ValueError(f"{name} must name a directory (unset it to keep no files)")
+            values[field.name] = environ[name]
             continue
         raw = environ[name].strip().lower()
         if field.type is bool:

@@ -14,9 +14,8 @@ Limit = Annotated[int, Query(ge=1, le=MAX_PAGE, description="Entries per page")]
 Offset = Annotated[int, Query(ge=0, description="Entries to skip, in id order")]
 
 
-def page(store, kind, limit, offset):
-    """One page of the ``kind`` entries of ``store``, as a :class:`Listing`."""
-    entries = store.listing(kind)
+def page(entries, limit, offset):
+    """One page of ``entries`` (``(id, bytes, last used)``, in order), as a :class:`Listing`."""
     chosen = entries[offset:offset + limit]
     following = offset + len(chosen)
     return Listing(items=[Stored(id=key, bytes=nbytes,

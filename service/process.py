@@ -25,7 +25,7 @@ def free_port():
 
 
 @contextmanager
-def running_service(environment=None, startup_seconds=600):
+def running_service(environment=None, startup_seconds=600, workers=None):
     """Start the service, wait until /readyz answers 200, yield its base URL, then stop it.
 
     Parameters
@@ -34,15 +34,28 @@ def running_service(environment=None, startup_seconds=600):
         Extra environment variables (e.g. ``RAYCORE_MAX_RAYS``).
     startup_seconds : float
         How long to wait for readiness (a fresh process may compile stale kernel caches).
+    workers : int, optional
+        ``raycore serve --workers``.
 
     Raises
     ------
     ServiceFailed
-        With the process's output.
+        With the process's output, also when it does not stop cleanly.
     """
+    with service_process(environment, startup_seconds, workers) as (_, url):
+        yield url
+
+
+@contextmanager
+def service_process(environment=None, startup_seconds=600, workers=None):
+    """:func:`running_service`, yielding ``(process, url)``: a test may kill the process
+    (``kill -9``); one that is still running at the end is stopped with SIGINT and must exit
+    cleanly."""
     port = free_port()
     command = [str(Path(sys.executable).with_name("raycore")), "serve", "--host", "127.0.0.1",
                "--port", str(port), "--log-level", "warning"]
+    if workers is not None:
+        command += ["--workers", str(workers)]
     with tempfile.TemporaryFile() as log:
         process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
                                    env={**os.environ, **(environment or {})})
@@ -52,6 +65,7 @@ def running_service(environment=None, startup_seconds=600):
             return ServiceFailed(f"{reason}; its output:\n{log.read().decode(errors='replace')}")
 
         url = f"http://127.0.0.1:{port}"
+        killed = False
         try:
             deadline = time.monotonic() + startup_seconds
             while not _ready(url):
@@ -60,15 +74,17 @@ def running_service(environment=None, startup_seconds=600):
                 if time.monotonic() > deadline:
                     raise failure(f"the service was not ready after {startup_seconds} s")
                 time.sleep(0.2)
-            yield url
+            yield process, url
         finally:
-            process.send_signal(signal.SIGINT)
+            killed = process.poll() == -signal.SIGKILL
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
             try:
                 returncode = process.wait(timeout=60)
             except subprocess.TimeoutExpired:
                 process.kill()
                 returncode = process.wait()
-        if returncode != 0:
+        if returncode != 0 and not killed:
             raise failure(f"the service stopped with {returncode}")
 
 

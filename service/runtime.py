@@ -1,4 +1,5 @@
-"""What the routes share: settings, the store, and the slots for geometry work."""
+"""What the routes share: settings, the store (in memory, and on disk when configured), and the
+slots for geometry work."""
 
 import asyncio
 import threading
@@ -9,7 +10,8 @@ import anyio
 from fastapi import Request
 
 from service.config import Settings
-from service.errors import NotFound
+from service.datadir import DataDir
+from service.errors import LimitExceeded, NotFound
 from service.store import Store
 
 
@@ -18,11 +20,13 @@ class Runtime:
     """Per-app state, created by :func:`service.app.create_app`.
 
     ``limiter`` and ``startup`` (the task that loads the demo scene, if any) are made at
-    startup, inside the event loop that they belong to.
+    startup, inside the event loop that they belong to.  With a data directory, the memory
+    store is a cache of it: what is kept goes to disk first, and a miss in memory looks there.
     """
 
     settings: Settings
     store: Store
+    disk: DataDir | None = None  # the data directory, when RAYCORE_DATA_DIR is set
     ready: threading.Event = field(default_factory=threading.Event)
     limiter: anyio.CapacityLimiter | None = None
     startup: asyncio.Task | None = None
@@ -41,20 +45,68 @@ class Runtime:
 
         A miss while startup work runs waits for it: the demo scene exists once it is done.
         With several workers, a client that saw another worker answer /readyz cannot tell that
-        this one is still loading.
+        this one is still loading.  A miss in memory reads the data directory, off the event
+        loop.
         """
         entry = self.store.get(kind, key)
         if entry is None and self.startup is not None and not self.startup.done():
             await asyncio.shield(self.startup)  # a client that leaves must not cancel startup
             entry = self.store.get(kind, key)
+        if entry is None and self.disk is not None:
+            entry = await anyio.to_thread.run_sync(self._from_disk, kind, key)
+        elif self.disk is not None:
+            self.disk.touch(kind, key)
         if entry is None:
             raise _not_found(kind, key)
         return entry
 
+    def find(self, kind, key):
+        """:meth:`get` for worker threads: the entry from memory or the data directory, or
+        None."""
+        entry = self.store.get(kind, key)
+        if entry is None and self.disk is not None:
+            return self._from_disk(kind, key)
+        if self.disk is not None:
+            self.disk.touch(kind, key)
+        return entry
+
+    def _from_disk(self, kind, key):
+        loaded = self.disk.load(kind, key)
+        if loaded is None:
+            return None
+        try:
+            return self.store.put(kind, key, *loaded)[0]
+        except LimitExceeded:  # larger than the memory budget allows: answer from it once
+            return loaded[0]
+
+    def keep(self, kind, key, entry, nbytes):
+        """Store a new mesh or scene: in the data directory first (flushed, so that it
+        survives a crash once this returns), then in memory.  Call it from a worker thread.
+
+        Returns
+        -------
+        entry, created : the stored entry and whether it is new (in memory and on disk)
+        """
+        stored_before = self.disk is not None and not self.disk.save(kind, key, entry)
+        entry, created = self.store.put(kind, key, entry, nbytes)
+        return entry, created and not stored_before
+
     def delete(self, kind, key):
-        """Remove a stored mesh or scene; NotFound when there is none under ``key``."""
-        if not self.store.delete(kind, key):
+        """Remove a stored mesh or scene, from memory and the data directory; NotFound when
+        there is none under ``key``."""
+        found = self.store.delete(kind, key)
+        if self.disk is not None:
+            found = self.disk.delete(kind, key) or found
+        if not found:
             raise _not_found(kind, key)
+
+    def listing(self, kind):
+        """``(id, bytes, last used)`` of every ``kind`` entry in memory or on disk, by id (a
+        file's bytes and time where only the data directory holds it)."""
+        entries = {key: (nbytes, used) for key, nbytes, used in self.store.listing(kind)}
+        if self.disk is not None:
+            entries = {**self.disk.listing(kind), **entries}
+        return sorted((key, nbytes, used) for key, (nbytes, used) in entries.items())
 
 
 def _not_found(kind, key):

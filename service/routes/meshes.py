@@ -7,6 +7,7 @@ store, and the app includes it behind the API key when one is configured.
 from pathlib import PurePath
 from typing import Annotated, Literal
 
+import anyio
 from fastapi import APIRouter, Depends, Query, Request, Response
 
 from service.builder import MESH_FORMATS, parse_mesh
@@ -83,7 +84,9 @@ async def upload_mesh(request: Request, response: Response,
         file_type = _file_type(file_format, media_type)
         data = await request.body()
     entry = await state.compute(parse_mesh, data, file_type, state.settings.max_triangles)
-    entry, created = state.store.put("mesh", entry.info.id, entry, entry.nbytes)
+    # a thread: with a data directory, keeping it writes and flushes a file
+    entry, created = await anyio.to_thread.run_sync(state.keep, "mesh", entry.info.id, entry,
+                                                    entry.nbytes)
     if not created:
         response.status_code = 200
     return entry.info
@@ -93,7 +96,7 @@ async def upload_mesh(request: Request, response: Response,
             responses=error_responses(422))
 async def list_meshes(state: Annotated[Runtime, Depends(runtime)], limit: Limit = 100,
                       offset: Offset = 0):
-    return page(state.store, "mesh", limit, offset)
+    return page(state.listing("mesh"), limit, offset)
 
 
 @router.get("/{mesh_id}", response_model=MeshInfo, summary="Describe an uploaded mesh",

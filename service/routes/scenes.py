@@ -81,12 +81,12 @@ _BUILD_RULES = (
 async def create_scene(spec: SceneSpec, response: Response, state: State):
     def build():
         key = scene_id(spec)
-        existing = state.store.get("scene", key)
+        existing = state.find("scene", key)
         if existing is not None:
             return existing, False
-        entry, held = build_scene(spec, lambda mesh: state.store.get("mesh", mesh),
+        entry, held = build_scene(spec, lambda mesh: state.find("mesh", mesh),
                                   state.settings.max_triangles)
-        return state.store.put("scene", key, entry, held)
+        return state.keep("scene", key, entry, held)
 
     entry, created = await state.compute(build)
     if not created:
@@ -98,7 +98,7 @@ async def create_scene(spec: SceneSpec, response: Response, state: State):
             description="The demo scene is listed under its content id.",
             responses=error_responses(422))
 async def list_scenes(state: State, limit: Limit = 100, offset: Offset = 0):
-    return page(state.store, "scene", limit, offset)
+    return page(state.listing("scene"), limit, offset)
 
 
 @router.get("/{scene_id}", response_model=SceneInfo, summary="Describe a scene",

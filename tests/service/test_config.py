@@ -24,3 +24,13 @@ def test_body_deadline_from_the_environment():
     assert load_settings({"RAYCORE_BODY_SECONDS": "5"}).body_seconds == 5
     with pytest.raises(ValueError, match="RAYCORE_BODY_SECONDS"):
         load_settings({"RAYCORE_BODY_SECONDS": "0"})
+
+
+def test_data_directory_settings():
+    settings = load_settings({"RAYCORE_DATA_DIR": "/var/lib/raycore",
+                              "RAYCORE_DATA_BYTES": "1000"})
+    assert settings.data_dir == "/var/lib/raycore" and settings.data_bytes == 1000
+    assert load_settings({}).data_dir is None
+    for name, value in (("RAYCORE_DATA_DIR", " "), ("RAYCORE_DATA_BYTES", "lots")):
+        with pytest.raises(ValueError, match=name):
+            load_settings({name: value})

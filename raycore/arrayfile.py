@@ -1,0 +1,219 @@
+"""A file of named NumPy arrays behind a JSON header: checked on reading, memory-mappable.
+
+Layout (little-endian)::
+
+    [0:8]    magic b"\\x89RAYCORE"
+    [8:12]   uint32 format version
+    [12:16]  uint32 header length H
+    [16:20]  uint32 CRC-32 of the header
+    [20:20+H] UTF-8 JSON: {"meta": {...}, "arrays": [{"name", "dtype", "shape", "offset",
+             "crc32": [CRC-32 of each CHUNK bytes]}, ...], "data_bytes": D}
+    then, from the first multiple of ALIGN past the header (the data's start S), each array's
+    raw C-order bytes at S + its offset (a multiple of ALIGN); the file ends at S + D
+
+Nothing is pickled: the header is JSON and the arrays are plain numbers of the dtypes it names,
+so a file cannot run code when read.  Every array carries a CRC-32, and the header its own, so
+that a flipped bit or a truncated copy is refused rather than answered from.  Arrays start on
+64-byte boundaries, so that a memory map gives aligned views that compiled kernels take as they
+are (Numba types a misaligned array differently, and would compile its kernels again).
+"""
+
+import builtins
+import json
+import math
+import os
+import struct
+import tempfile
+import zlib
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import nullcontext
+
+import numpy as np
+
+MAGIC = b"\x89RAYCORE"
+#: Version of this layout and of what :mod:`raycore.scene_file` puts in it; a reader refuses a
+#: newer one.
+VERSION = 1
+ALIGN = 64
+#: Arrays are checksummed in pieces of this many bytes, so that a large file's pieces can be
+#: checked on several threads (zlib releases the GIL): 150 MB took 56 ms on one thread.
+CHUNK = 1 << 21
+_PREFIX = struct.Struct("<8sIII")
+#: The dtypes a file may hold: numbers only (an object dtype would need pickle).
+DTYPES = ("<f4", "<f8", "<i4", "<i8", "|u1", "|b1")
+
+
+def _aligned(offset):
+    return -(-offset // ALIGN) * ALIGN
+
+
+def _bytes(array):
+    """The array's memory as a flat uint8 array (no copy for a C-contiguous one)."""
+    return np.ascontiguousarray(array).reshape(-1).view(np.uint8)
+
+
+def _crcs(array):
+    """CRC-32 of each CHUNK bytes of the array's memory (one for an empty array)."""
+    data = _bytes(array)
+    return [zlib.crc32(data[i:i + CHUNK]) for i in range(0, max(len(data), 1), CHUNK)]
+
+
+def encode(meta, arrays):
+    """Yield the file's bytes, in parts, for ``meta`` (a JSON-able dict) and ``arrays``.
+
+    Parameters
+    ----------
+    meta : dict
+    arrays : dict of str to ndarray
+        Each of one of :data:`DTYPES` (native little-endian), any shape.
+
+    Yields
+    ------
+    bytes or memoryview
+        The prefix and header, then each array's bytes and the padding around them.
+    """
+    entries, offset = [], 0
+    for name, array in arrays.items():
+        array = np.ascontiguousarray(array)
+        if array.dtype.str not in DTYPES:
+            raise ValueError(f"array {name!r} has dtype {array.dtype}, not one of {DTYPES}")
+        entries.append({"name": name, "dtype": array.dtype.str, "shape": list(array.shape),
+                        "offset": offset, "crc32": _crcs(array)})
+        offset = _aligned(offset + array.nbytes)
+    header = json.dumps({"meta": meta, "arrays": entries, "data_bytes": offset}).encode()
+    yield _PREFIX.pack(MAGIC, VERSION, len(header), zlib.crc32(header)) + header
+    position = _PREFIX.size + len(header)
+    start = _aligned(position)
+    for entry, array in zip(entries, arrays.values(), strict=True):
+        yield bytes(start + entry["offset"] - position)
+        data = _bytes(array)
+        yield data
+        position = start + entry["offset"] + len(data)
+    yield bytes(start + offset - position)
+
+
+def write(path, meta, arrays):
+    """Write the file atomically: a temporary file beside ``path``, flushed to disk (fsync),
+    then renamed over it, so that a reader (or a crash) sees no file or the whole new one."""
+    path = os.path.abspath(os.fspath(path))
+    descriptor, temporary = tempfile.mkstemp(dir=os.path.dirname(path),
+                                             prefix=f".{os.path.basename(path)}.", suffix=".tmp")
+    try:
+        with os.fdopen(descriptor, "wb") as file:
+            for part in encode(meta, arrays):
+                file.write(part)
+            file.flush()
+            os.fsync(file.fileno())
+        os.replace(temporary, path)
+    finally:
+        if os.path.exists(temporary):  # not renamed: an error or an interrupt came first
+            os.unlink(temporary)
+    directory = os.open(os.path.dirname(path), os.O_RDONLY)
+    try:
+        os.fsync(directory)  # the rename itself survives a power cut
+    finally:
+        os.close(directory)
+
+
+def read(source, *, mmap=False):
+    """Read a file written by :func:`write` (or the bytes of one).
+
+    Parameters
+    ----------
+    source : str, path-like, bytes or bytearray
+    mmap : bool
+        Map the file rather than read it: the arrays are copy-on-write views of its pages
+        (shared with other processes that map it, read from disk as they are touched).
+
+    Returns
+    -------
+    meta : dict
+    arrays : dict of str to ndarray
+        Writable, aligned, in the dtypes and shapes the header names.
+
+    Raises
+    ------
+    ValueError
+        When the source is not such a file, is truncated, fails a checksum, or has a newer
+        format version; the message says which.
+    """
+    if isinstance(source, (bytes, bytearray, memoryview)):
+        raw = np.frombuffer(source, np.uint8).copy()  # aligned and writable
+    elif mmap:
+        size = os.path.getsize(source)
+        if size < _PREFIX.size:
+            raise ValueError(f"{source} is truncated: {size} bytes")
+        raw = np.memmap(source, np.uint8, mode="c")
+    else:
+        with open(source, "rb") as file:
+            size = os.fstat(file.fileno()).st_size
+            raw = np.empty(size, np.uint8)
+            if file.readinto(memoryview(raw)) != size:
+                raise ValueError(f"{source} changed while it was read")
+    return _parse(raw)
+
+
+def _parse(raw):
+    if len(raw) < _PREFIX.size:
+        raise ValueError(f"the scene file is truncated: {len(raw)} bytes")
+    magic, version, header_bytes, header_crc = _PREFIX.unpack(bytes(raw[:_PREFIX.size]))
+    if magic != MAGIC:
+        raise ValueError("not a raycore scene file (wrong magic number)")
+    if version > VERSION:
+        raise ValueError(f"the scene file has format version {version}, newer than this "
+                         f"raycore reads ({VERSION}): upgrade raycore")
+    if version < 1:
+        raise ValueError(f"the scene file has an unknown format version {version}")
+    end = _PREFIX.size + header_bytes
+    if len(raw) < end:
+        raise ValueError("the scene file is truncated (in its header)")
+    header = bytes(raw[_PREFIX.size:end])
+    if zlib.crc32(header) != header_crc:
+        raise ValueError("the scene file is corrupt (its header fails its checksum)")
+    try:
+        header = json.loads(header)
+        meta, entries = header["meta"], header["arrays"]
+        start = _aligned(end)
+        file_bytes = start + int(header["data_bytes"])
+    except (ValueError, KeyError, TypeError) as error:
+        raise ValueError(f"the scene file is corrupt (unreadable header: {error})") from error
+    if not isinstance(meta, dict) or not isinstance(entries, list):
+        raise ValueError("the scene file is corrupt (its header lacks meta or arrays)")
+    if len(raw) < file_bytes:
+        raise ValueError(f"the scene file is truncated: {len(raw)} of {file_bytes} bytes")
+    if len(raw) > file_bytes:
+        raise ValueError(f"the scene file is corrupt: {len(raw) - file_bytes} bytes past its end")
+    arrays, pieces = {}, []
+    for entry in entries:
+        name, array, crcs = _array(raw, entry, start, file_bytes)
+        arrays[name] = array
+        data = _bytes(array)
+        pieces += [(name, data[i * CHUNK:(i + 1) * CHUNK], crc) for i, crc in enumerate(crcs)]
+    # threads only for files of several pieces: starting them costs more than a small file's
+    # checksums
+    threads = min(sum(len(piece[1]) for piece in pieces) // CHUNK, os.cpu_count() or 1)
+    with ThreadPoolExecutor(threads) if threads > 1 else nullcontext() as pool:
+        found = (pool or builtins).map(lambda piece: zlib.crc32(piece[1]), pieces)
+        for (name, _, crc), value in zip(pieces, found, strict=True):
+            if value != crc:
+                raise ValueError(f"the scene file is corrupt (array {name!r} fails its "
+                                 "checksum)")
+    return meta, arrays
+
+
+def _array(raw, entry, start, file_bytes):
+    try:
+        name, dtype = entry["name"], np.dtype(entry["dtype"])
+        shape, crcs = tuple(int(n) for n in entry["shape"]), [int(c) for c in entry["crc32"]]
+        offset = start + int(entry["offset"])
+        nbytes = dtype.itemsize * math.prod(shape)
+    except (ValueError, KeyError, TypeError) as error:
+        raise ValueError(f"the scene file is corrupt (bad array entry: {error})") from error
+    if entry["dtype"] not in DTYPES or any(n < 0 for n in shape) or offset % ALIGN:
+        raise ValueError(f"the scene file is corrupt (array {name!r}: {entry})")
+    if offset < start or offset + nbytes > file_bytes:
+        raise ValueError(f"the scene file is corrupt (array {name!r} lies outside it)")
+    if len(crcs) != max(-(-nbytes // CHUNK), 1):
+        raise ValueError(f"the scene file is corrupt (array {name!r} has {len(crcs)} checksums)")
+    # np.asarray: a plain ndarray view, not a memmap subclass, for the kernels
+    return name, np.asarray(raw[offset:offset + nbytes]).view(dtype).reshape(shape), crcs

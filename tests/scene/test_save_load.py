@@ -1,0 +1,276 @@
+"""Scene.save / Scene.load and pickling: the same answers without a build, one copy of each
+array in a pickle, and a ValueError (never a crash) for files that are truncated, corrupt,
+crafted or newer."""
+
+import json
+import pickle
+import struct
+
+import numpy as np
+import pytest
+
+from raycore import Scene, arrayfile, scene_file
+
+from .brute import random_scene, scene_rays, shared_mesh
+
+
+def every_kind(dtype):
+    """The 37-object scene of every kind (meshes, prototypes, instances, each analytic shape)
+    and, beside it, a shared mesh file's mesh placed twice (one placement of an instance)."""
+    spec, _ = random_scene(3)
+    scene = spec.scene(dtype, max_leaf_size=6, bins=12)
+    bunny = shared_mesh("stanford-bunny")
+    g = scene.add_mesh(bunny.vertices * 20, bunny.faces)
+    moved = np.eye(4)
+    moved[:3, 3] = [0, 20, 0]
+    scene.add_instance(scene.add_instance(g, moved), moved)
+    return scene
+
+
+def answers(scene, rays):
+    origins, directions, tmin, tmax, _ = rays
+    hits = scene.intersect(origins, directions, tmin, tmax, fields=("uv", "normal", "point"))
+    every = scene.intersect_all(origins, directions, tmin, tmax)
+    return {"t": hits.t, "geom_id": hits.geom_id, "prim_id": hits.prim_id, "uv": hits.uv,
+            "normal": hits.normal, "point": hits.point,
+            "occluded": scene.occluded(origins, directions, tmin, tmax),
+            "count": scene.count(origins, directions, tmin, tmax),
+            "all_t": every.t, "all_geom": every.geom_id, "all_prim": every.prim_id,
+            "contains": scene.contains(origins), "bounds": np.stack(scene.bounds)}
+
+
+@pytest.fixture(scope="module", params=("float32", "float64"))
+def saved(request, tmp_path_factory):
+    """A scene of every kind, its answers, and the file it was saved to."""
+    scene = every_kind(request.param)
+    rays = scene_rays(3)
+    path = tmp_path_factory.mktemp("scenes") / "scene.rcs"
+    scene.save(path)
+    return scene, answers(scene, rays), path, rays
+
+
+@pytest.mark.parametrize("how", ["read", "mmap", "pickle"])
+def test_round_trip_answers_equal(saved, how):
+    scene, expected, path, rays = saved
+    if how == "pickle":
+        loaded = pickle.loads(pickle.dumps(scene))
+    else:
+        loaded = Scene.load(path, mmap=how == "mmap")
+    assert loaded.dtype == scene.dtype and loaded.build_params == scene.build_params
+    assert len(loaded) == len(scene) and loaded.triangle_count == scene.triangle_count
+    got = answers(loaded, rays)
+    for name, value in expected.items():
+        np.testing.assert_array_equal(got[name], value, err_msg=name)
+    # the rays reach every object, so that every kind's stored data was used
+    assert set(expected["all_geom"]) == set(range(len(scene))) - {
+        i for i in range(len(scene)) if not scene._visible[i]}
+    assert loaded.stats() == scene.stats()
+
+
+def test_loaded_scene_skips_the_build_and_can_grow(saved):
+    scene, _, path, rays = saved
+    loaded = Scene.load(path)
+    assert loaded._record is not None  # ready for queries without build()
+    # adding objects rebuilds the top tree over the stored meshes' trees, as in the original
+    grown = pickle.loads(pickle.dumps(scene))
+    for target in (loaded, grown):
+        target.add_sphere([0.5, 0.25, 0.125], 2.0)
+        target.add_instance(len(scene) - 1, np.diag([1.5, 1.5, 1.5, 1.0]))
+    assert loaded._record is None
+    got, want = answers(loaded, rays), answers(grown, rays)
+    for name, value in want.items():
+        np.testing.assert_array_equal(got[name], value, err_msg=name)
+    assert np.any(got["geom_id"] == len(scene)) and np.any(got["geom_id"] == len(scene) + 1)
+
+
+def test_pickle_is_about_the_size_of_the_file(saved):
+    scene, _, path, _ = saved
+    pickled = pickle.dumps(scene)
+    assert abs(len(pickled) - path.stat().st_size) < 256
+    geometry = sum(m.vertices.nbytes + m.faces.nbytes + m.nbytes for m in scene._meshes)
+    assert len(pickled) < 1.05 * geometry + 64 * 1024  # one copy of each array
+
+
+def tampered(path, tmp_path, change):
+    data = bytearray(path.read_bytes())
+    change(data)
+    out = tmp_path / "bad.rcs"
+    out.write_bytes(bytes(data))
+    return out
+
+
+def header(data):
+    _, _, length, _ = struct.unpack_from("<8sIII", data)
+    return json.loads(bytes(data[20:20 + length]))
+
+
+@pytest.mark.parametrize("keep", [0, 7, 19, 100, 0.5, -1])
+def test_truncated_file_is_refused(saved, tmp_path, keep):
+    _, _, path, _ = saved
+    size = path.stat().st_size
+    keep = int(size * keep) if isinstance(keep, float) else keep % size
+    bad = tampered(path, tmp_path, lambda data: data.__delitem__(slice(keep, None)))
+    with pytest.raises(ValueError, match="truncated"):
+        Scene.load(bad)
+
+
+@pytest.mark.parametrize("name", ["kind", "params", "xforms", "top.nodes", "mesh0.nodes",
+                                  "mesh0.blocks", "mesh0.slot_face", "mesh3.faces"])
+def test_flipped_bit_in_any_array_is_refused(saved, tmp_path, name):
+    _, _, path, _ = saved
+
+    def flip(data):
+        info = header(data)
+        start = -(-(20 + struct.unpack_from("<I", data, 12)[0]) // arrayfile.ALIGN) * \
+            arrayfile.ALIGN
+        entry = next(e for e in info["arrays"] if e["name"] == name)
+        data[start + entry["offset"] + 5] ^= 0x10
+
+    with pytest.raises(ValueError, match=f"array '{name}' fails its checksum"):
+        Scene.load(tampered(path, tmp_path, flip))
+
+
+def test_flipped_bit_in_the_header_is_refused(saved, tmp_path):
+    _, _, path, _ = saved
+    bad = tampered(path, tmp_path, lambda data: data.__setitem__(40, data[40] ^ 1))
+    with pytest.raises(ValueError, match="header fails its checksum"):
+        Scene.load(bad)
+
+
+def test_other_files_and_newer_versions_are_refused(saved, tmp_path):
+    _, _, path, _ = saved
+    other = tmp_path / "other.npy"
+    np.save(other, np.zeros(10))
+    with pytest.raises(ValueError, match="not a raycore scene file"):
+        Scene.load(other)
+    newer = tampered(path, tmp_path, lambda data: struct.pack_into(
+        "<I", data, 8, arrayfile.VERSION + 1))
+    with pytest.raises(ValueError, match="newer than this raycore reads"):
+        Scene.load(newer)
+    with pytest.raises(ValueError, match="not a raycore scene file"):
+        scene_file.load(b"nothing at all here!!")
+
+
+def rewritten(path, tmp_path, change):
+    """The file's contents changed by ``change(meta, arrays)`` and written again with valid
+    checksums: what a bug or a crafted file could hold."""
+    meta, arrays = arrayfile.read(path)
+    arrays = {name: array.copy() for name, array in arrays.items()}
+    change(meta, arrays)
+    out = tmp_path / "crafted.rcs"
+    arrayfile.write(out, meta, arrays)
+    return out
+
+
+def _child_slot(nodes):
+    """(row, slot) of an internal child in a mesh's wide rows."""
+    from raycore.bvh.layout import COUNTS, REFS, WIDTH
+    refs = nodes.view(np.int32)
+    rows, slots = np.nonzero((refs[:, COUNTS:COUNTS + WIDTH] == 0)
+                             & (refs[:, REFS:REFS + WIDTH] > 0))
+    return rows[0], REFS + slots[0]
+
+
+def _leaf_slot(nodes):
+    from raycore.bvh.layout import COUNTS, REFS, WIDTH
+    refs = nodes.view(np.int32)
+    rows, slots = np.nonzero(refs[:, COUNTS:COUNTS + WIDTH] > 0)
+    return rows[0], REFS + slots[0]
+
+
+def loop_to_root(meta, arrays):
+    nodes = arrays["mesh4.nodes"]
+    row, col = _child_slot(nodes)
+    nodes.view(np.int32)[row, col] = 0
+
+
+def past_the_end(meta, arrays):
+    nodes = arrays["mesh4.nodes"]
+    row, col = _child_slot(nodes)
+    nodes.view(np.int32)[row, col] = len(nodes)
+
+
+def leaf_past_blocks(meta, arrays):
+    nodes = arrays["mesh4.nodes"]
+    row, col = _leaf_slot(nodes)
+    nodes.view(np.int32)[row, col] = len(arrays["mesh4.blocks"])
+
+
+def top_leaf_past_slots(meta, arrays):
+    nodes = arrays["top.nodes"]
+    row, col = _leaf_slot(nodes)
+    nodes.view(np.int32)[row, col] = len(arrays["top.slots"])
+
+
+def unused_slot_entered(meta, arrays):
+    nodes = arrays["mesh0.nodes"]
+    from raycore.bvh.layout import WIDTH
+    unused = np.argwhere(nodes[:, :WIDTH] == np.inf)
+    row, slot = unused[0]
+    nodes[row, slot] = 0.0  # a box that rays can enter, around a reference to the root
+
+
+CRAFTED = {
+    "internal child back to the root": loop_to_root,
+    "internal child past the last row": past_the_end,
+    "leaf past the mesh's blocks": leaf_past_blocks,
+    "top-tree leaf past its objects": top_leaf_past_slots,
+    "unused slot that rays can enter": unused_slot_entered,
+    "unknown object kind": lambda m, a: a["kind"].__setitem__(0, 99),
+    "mesh reference out of range": lambda m, a: a["mesh_of"].__setitem__(
+        int(np.flatnonzero(a["kind"] == 16)[0]), 999),
+    "parameter row out of range": lambda m, a: a["param_row"].__setitem__(0, 10**6),
+    "transform row out of range": lambda m, a: a["xform_row"].__setitem__(
+        int(np.flatnonzero(a["xform_row"] >= 0)[0]), 10**6),
+    "face index out of range": lambda m, a: a["mesh0.faces"].__setitem__((0, 0), 10**6),
+    "slot face out of range": lambda m, a: a["mesh0.slot_face"].__setitem__(0, 10**6),
+    "direct object out of range": lambda m, a: a["top.direct"].__setitem__(0, 10**6),
+    "missing array": lambda m, a: a.pop("mesh2.blocks"),
+    "wrong dtype": lambda m, a: a.__setitem__("kind", a["kind"].astype(np.int32)),
+    "wrong shape": lambda m, a: a.__setitem__("mesh1.blocks", a["mesh1.blocks"][:, :5].copy()),
+    "other layout": lambda m, a: m["layout"].__setitem__("node_width", 32),
+    "missing meta": lambda m, a: m.pop("meshes"),
+}
+
+
+@pytest.mark.parametrize("case", CRAFTED)
+def test_crafted_file_with_valid_checksums_is_refused(saved, tmp_path, case):
+    _, _, path, _ = saved
+    bad = rewritten(path, tmp_path, CRAFTED[case])
+    with pytest.raises(ValueError, match="scene file"):
+        Scene.load(bad)
+
+
+def test_deep_chain_is_refused(tmp_path):
+    """A tree deeper than the traversal's stack allows (each row one internal child)."""
+    from raycore.bvh.build import MAX_DEPTH
+    from raycore.bvh.layout import COUNTS, NODE_WIDTH, REFS, WIDTH
+    scene = Scene()
+    scene.add_mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+    scene.save(tmp_path / "one.rcs")
+
+    def chain(meta, arrays):
+        rows = MAX_DEPTH + 1
+        nodes = np.zeros((rows, NODE_WIDTH), np.float32)
+        nodes[:, :3 * WIDTH] = np.inf
+        nodes[:, 3 * WIDTH:6 * WIDTH] = -np.inf
+        nodes[:, [0, WIDTH, 2 * WIDTH]] = 0.0
+        nodes[:, [3 * WIDTH, 4 * WIDTH, 5 * WIDTH]] = 1.0
+        refs = nodes.view(np.int32)
+        refs[:, REFS:] = 0
+        refs[:-1, REFS] = np.arange(1, rows)
+        refs[-1, COUNTS] = 1
+        arrays["mesh0.nodes"] = nodes
+
+    with pytest.raises(ValueError, match="deeper than"):
+        Scene.load(rewritten(tmp_path / "one.rcs", tmp_path, chain))
+
+
+def test_save_is_atomic_and_leaves_no_temporary(tmp_path):
+    scene = Scene()
+    scene.add_sphere([0, 0, 0], 1.0)
+    scene.save(tmp_path / "a.rcs")
+    scene.add_sphere([3, 0, 0], 1.0)
+    scene.save(tmp_path / "a.rcs")  # replaces it
+    assert [p.name for p in tmp_path.iterdir()] == ["a.rcs"]
+    assert len(Scene.load(tmp_path / "a.rcs")) == 2
