@@ -302,6 +302,20 @@ class Server:
         return found
 
 
+@contextlib.contextmanager
+def serving(server):
+    """Run the block against ``server``; print its output if the block fails, then stop it and
+    check that it shut down cleanly."""
+    try:
+        yield server
+    except BaseException:
+        print(server.output(), file=sys.stderr)
+        raise
+    finally:
+        code = server.stop()
+    check_clean_stop(server, code)
+
+
 def check_clean_stop(server, code):
     """uvicorn shuts down on SIGTERM, then raises the signal again: the exit is by SIGTERM."""
     if code not in (0, -signal.SIGTERM) or "Application shutdown complete" not in server.output():
@@ -623,7 +637,7 @@ def test_single_worker(container, work):
         raise TestFailed(f"the image holds no Numba cache in {cache_dir}")
     log(f"start the image's command ({len(before)} files in its Numba cache), demo scene off")
     server = Server(container, {"RAYCORE_DEMO": "false"}, work / "server.log")
-    try:
+    with serving(server):
         startup = server.wait_healthy()
         passed(f"/healthz answers, {startup:.1f} s after the start")
         users = {uid for _, uid in server.processes()}
@@ -642,12 +656,6 @@ def test_single_worker(container, work):
         client = Client(server.url)
         exercise(client)
         log(f"resident memory after the requests: {server.memory()}")
-    except BaseException:
-        print(server.output(), file=sys.stderr)
-        raise
-    finally:
-        code = server.stop()
-    check_clean_stop(server, code)
     if subprocess.run(check, timeout=60, stderr=subprocess.DEVNULL).returncode == 0:
         raise TestFailed("the image's HEALTHCHECK passed with the server stopped")
     passed("the image's HEALTHCHECK fails once the server is stopped")
@@ -724,7 +732,7 @@ def test_compose_workers(container, work):
     os.chown(volume, 10001, 10001)
     container._mount(["--bind", str(volume)], environment["RAYCORE_DATA_DIR"].lstrip("/"))
     server = Server(container, environment, work / "server-compose.log")
-    try:
+    with serving(server):
         startup = server.wait_healthy()
         deadline = time.monotonic() + 180
         # one worker's readiness: a request that the other takes while loading waits for its demo
@@ -765,12 +773,6 @@ def test_compose_workers(container, work):
         connection.close()
         passed(f"two workers: {len(processes)} processes ({server.memory()}), healthy after "
                f"{startup:.1f} s, ready, render the demo, answer queries")
-    except BaseException:
-        print(server.output(), file=sys.stderr)
-        raise
-    finally:
-        code = server.stop()
-    check_clean_stop(server, code)
     stored = sorted(path.name for path in volume.rglob("*.rcf"))
     if stored != [f"{scene}.rcf"]:
         raise TestFailed(f"the volume holds {stored}, not the scene {scene}")
@@ -784,7 +786,7 @@ def restarted_finds_scene(container, environment, work, scene):
     """The container started again on the same volume answers for ``scene`` on fresh
     connections (each may reach either worker), without it being sent again."""
     server = Server(container, environment, work / "server-restarted.log")
-    try:
+    with serving(server):
         server.wait_healthy()
         rays = {"origins": [[0, 0, -5]], "directions": [[0, 0, 1]]}
         for _ in range(6):
@@ -794,12 +796,6 @@ def restarted_finds_scene(container, environment, work, scene):
                 raise TestFailed(f"after a restart, intersect answered {status}: {body[:300]!r}")
         passed("restarted on the same volume, the service answers for its scene (6 of 6 fresh "
                "connections)")
-    except BaseException:
-        print(server.output(), file=sys.stderr)
-        raise
-    finally:
-        code = server.stop()
-    check_clean_stop(server, code)
 
 
 def show_cold_start(container, work):
