@@ -4,6 +4,7 @@ import json
 from pathlib import Path
 
 import pytest
+from openapi_spec_validator import validate
 
 from raycore.cli import main
 from service.app import create_app
@@ -20,6 +21,12 @@ def document():
 def test_committed_document_matches_the_app(document):
     committed = json.loads(COMMITTED.read_text())
     assert committed == document, "openapi/openapi.json is stale: run `make openapi`"
+
+
+def test_committed_document_is_valid_openapi():
+    # raises OpenAPIValidationError, naming what is wrong (the served documents: see
+    # test_schemathesis.py, which validates them in both configurations)
+    validate(json.loads(COMMITTED.read_text()))
 
 
 def test_cli_writes_the_document(tmp_path, document):

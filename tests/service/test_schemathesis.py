@@ -14,6 +14,7 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
+from openapi_spec_validator import validate
 
 from service.process import running_service
 
@@ -77,6 +78,7 @@ def test_schemathesis_finds_nothing(key, tmp_path, monkeypatch, warm_kernels):
               for checks in event.get("ScenarioFinished", {}).get("recorder", {})
               .get("checks", {}).values() for check in checks if check["status"] == "failure"]
     assert not errors and not failed, output
+    validate(document)  # the served document is valid OpenAPI (openapi-spec-validator)
     # the document describes this configuration: security exactly when a key is set
     assert ("securitySchemes" in document["components"]) == (key is not None)
     counts = cases_per_operation(events)
