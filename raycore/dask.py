@@ -29,7 +29,7 @@ import dask
 import dask.array as da
 import numpy as np
 
-from raycore.hits import SURFACE_FIELDS
+from raycore.hits import check_fields
 
 __all__ = ["intersect", "occluded", "count", "intersect_all"]
 
@@ -123,10 +123,7 @@ def intersect(scene, origins, directions, tmin=0.0, tmax=np.inf, *, triangle_tes
         ``t`` (N,), ``geom_id`` and ``prim_id`` (N,) int64, and each of ``fields``: ``uv``
         (N, 2), ``normal`` and ``point`` (N, 3).
     """
-    fields = (fields,) if isinstance(fields, str) else tuple(fields)
-    unknown = [f for f in fields if f not in SURFACE_FIELDS]
-    if unknown:
-        raise ValueError(f"fields must be among {SURFACE_FIELDS}, got {unknown}")
+    fields = check_fields(fields)
     options = {"triangle_test": triangle_test, "sphere_method": sphere_method, "fields": fields}
     real = np.dtype(scene.dtype)
     specs = {"t": (real, (), True), "geom_id": (np.int64, (), True),

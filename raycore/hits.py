@@ -8,6 +8,16 @@ import numpy as np
 SURFACE_FIELDS = ("uv", "normal", "point")
 
 
+def check_fields(fields):
+    """``fields`` (a name, or names) as a tuple of :data:`SURFACE_FIELDS`; ``ValueError``
+    naming the unknown ones."""
+    fields = (fields,) if isinstance(fields, str) else tuple(fields)
+    unknown = [f for f in fields if f not in SURFACE_FIELDS]
+    if unknown:
+        raise ValueError(f"fields must be among {SURFACE_FIELDS}, got {unknown}")
+    return fields
+
+
 @dataclass(frozen=True)
 class Hits:
     """Closest hit of each ray.

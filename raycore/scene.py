@@ -16,7 +16,7 @@ from raycore.bvh.layout import NODE_WIDTH, build_bvh
 from raycore.bvh.record import SceneRecord
 from raycore.bvh.simd import BLOCK
 from raycore.bvh.traverse import MESH
-from raycore.hits import SURFACE_FIELDS, AllHits, Hits
+from raycore.hits import AllHits, Hits, check_fields
 from raycore.integrations import open3d as _open3d
 from raycore.mesh import Mesh, affine_inverse, affine_product, validate_transform
 from raycore.primitives import analytic, box, cone, cylinder, disk, plane, sphere
@@ -308,7 +308,7 @@ class Scene:
         -------
         Hits
         """
-        fields = _check_fields(fields) if fields else ()
+        fields = check_fields(fields) if fields else ()
         test = triangle_test_code(triangle_test)
         method = analytic.sphere_method_code(sphere_method)
         rays = self._rays(origins, directions, tmin, tmax)
@@ -473,12 +473,3 @@ def _starts(sizes):
     """(len(sizes),) int64: where each of consecutive runs of ``sizes`` starts."""
     return np.cumsum([0, *sizes])[:-1].astype(np.int64)
 
-
-def _check_fields(fields):
-    if isinstance(fields, str):
-        fields = (fields,)
-    fields = tuple(fields)
-    unknown = [f for f in fields if f not in SURFACE_FIELDS]
-    if unknown:
-        raise ValueError(f"fields must be among {SURFACE_FIELDS}, got {unknown}")
-    return fields

@@ -13,13 +13,13 @@ import numpy as np
 
 from raycore.commands import CommandError, needs_service_extra, write_file
 from raycore.commands.progress import Progress
-from raycore.commands.scenes import load_scene
+from raycore.commands.scenes import check_file, load_scene
+from raycore.hits import SURFACE_FIELDS
 
 #: Rays per call: a batch goes through in chunks of this many, so that the progress bar moves.
 #: Rays are independent, so the answers are those of one call; a chunk is large enough (about
 #: 0.1-0.5 s of work) that the calls' own overhead does not show.
 CHUNK = 2**20
-_FIELDS = ("uv", "normal", "point")
 
 
 def add_parser(commands):
@@ -49,10 +49,10 @@ def _fields(text):
     import argparse
 
     fields = [name.strip() for name in text.split(",") if name.strip()]
-    unknown = [name for name in fields if name not in _FIELDS]
+    unknown = [name for name in fields if name not in SURFACE_FIELDS]
     if unknown or not fields:
-        raise argparse.ArgumentTypeError(f"must be among {', '.join(_FIELDS)} (comma-separated), "
-                                         f"got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"must be among {', '.join(SURFACE_FIELDS)} (comma-separated), got {text!r}")
     return list(dict.fromkeys(fields))
 
 
@@ -68,8 +68,7 @@ def run(args):
     if options.fields and options.query != "closest":
         raise CommandError(f"--fields apply to closest-hit queries, not --query {options.query}")
     rays_path = Path(args.rays)
-    if not rays_path.is_file():
-        raise CommandError(f"{rays_path}: no such file")
+    check_file(rays_path, str(rays_path))
     try:
         rays = codecs.rays_from_npy(codecs.read_npy(rays_path.read_bytes()), None, None)
     except ClientError as error:

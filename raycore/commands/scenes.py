@@ -38,7 +38,7 @@ def load_scene(path, dtype, progress):
     from service.builder import MESH_FORMATS
 
     path = Path(path)
-    _check_file(path, str(path))
+    check_file(path, str(path))
     suffix = path.suffix[1:].lower()
     if suffix == "json":
         return _load_json(path, dtype, progress)
@@ -58,7 +58,8 @@ def load_scene(path, dtype, progress):
     return scene, None
 
 
-def _check_file(path, where):
+def check_file(path, where):
+    """CommandError unless ``path`` is an existing file (``where`` names it in the message)."""
     if not path.exists():
         raise CommandError(f"{where}: no such file")
     if not path.is_file():
@@ -87,7 +88,7 @@ def _load_json(path, dtype, progress):
         if not isinstance(name, str) or name in meshes:
             continue
         file, where = path.parent / name, f"{path}: objects[{index}].mesh"
-        _check_file(file, f"{where}: {file}")
+        check_file(file, f"{where}: {file}")
         with progress.stage(f"loading {file.name}"):
             try:
                 meshes[name] = parse_mesh(file.read_bytes(), file.suffix[1:].lower(), UNLIMITED)
