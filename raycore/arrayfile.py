@@ -92,6 +92,25 @@ def encode(meta, arrays):
     yield bytes(start + offset - position)
 
 
+#: Glob pattern of the temporary files that :func:`write` makes beside their target (a writer
+#: killed mid-write leaves one behind).
+TEMPORARY_PATTERN = ".*.tmp"
+
+
+def checked(arrays, name, dtype, shape, what="the file"):
+    """``arrays[name]`` (of a file :func:`read` returned), with ``dtype`` and ``shape`` (ints,
+    or None for any length); ``ValueError`` saying that ``what`` is corrupt otherwise."""
+    array = arrays.get(name)
+    if array is None:
+        raise ValueError(f"{what} is corrupt (array {name!r} is missing)")
+    if array.dtype != np.dtype(dtype) or array.ndim != len(shape) or any(
+            want is not None and got != want
+            for got, want in zip(array.shape, shape, strict=True)):
+        raise ValueError(f"{what} is corrupt (array {name!r} is {array.dtype} {array.shape}, "
+                         f"not {np.dtype(dtype)} {shape})")
+    return array
+
+
 def write(path, meta, arrays):
     """Write the file atomically: a temporary file beside ``path``, flushed to disk (fsync),
     then renamed over it, so that a reader (or a crash) sees no file or the whole new one."""

@@ -9,7 +9,6 @@ with the same code as ``build()`` (``Scene._assemble``).  Pickling a Scene goes 
 bytes, so that a pickle holds each array once.
 """
 
-import io
 
 import numpy as np
 
@@ -91,10 +90,7 @@ def save(scene, path, extra=None):
 
 def dumps(scene):
     """The bytes of :func:`save`'s file (for pickling)."""
-    buffer = io.BytesIO()
-    for part in arrayfile.encode(*contents(scene)):
-        buffer.write(part)
-    return buffer.getvalue()
+    return b"".join(arrayfile.encode(*contents(scene)))
 
 
 def load(source, *, mmap=False):
@@ -117,23 +113,11 @@ def load_with_extra(source, *, mmap=False):
     return scene, meta.get("extra"), extra
 
 
-class _Arrays:
-    """The file's arrays, each taken with the dtype and shape it must have."""
-
-    def __init__(self, arrays):
-        self._arrays = arrays
-
-    def __call__(self, name, dtype, shape):
-        """``arrays[name]``, checked: ``shape`` holds ints or None (any length)."""
-        array = self._arrays.get(name)
-        if array is None:
-            raise ValueError(f"the scene file is corrupt (array {name!r} is missing)")
-        if array.dtype != np.dtype(dtype) or array.ndim != len(shape) or any(
-                want is not None and got != want
-                for got, want in zip(array.shape, shape, strict=True)):
-            raise ValueError(f"the scene file is corrupt (array {name!r} is {array.dtype} "
-                             f"{array.shape}, not {np.dtype(dtype)} {shape})")
-        return array
+def _taker(arrays):
+    """``take(name, dtype, shape)``: the file's array ``name``, checked
+    (:func:`raycore.arrayfile.checked`)."""
+    return lambda name, dtype, shape: arrayfile.checked(arrays, name, dtype, shape,
+                                                        "the scene file")
 
 
 def _within(values, low, high, what):
@@ -155,7 +139,7 @@ def _restore(Scene, meta, arrays):
                          f"raycore's {LAYOUT}: build the scene again and save it")
     scene = Scene(meta["dtype"], **meta["build"])
     dtype = scene.dtype
-    take = _Arrays(arrays)
+    take = _taker(arrays)
     kind = take("kind", np.int64, (None,))
     n = len(kind)
     param_row = take("param_row", np.int64, (n,))

@@ -92,15 +92,15 @@ class DataDir:
         try:
             if kind == "mesh":
                 meta, arrays = arrayfile.read(path)
-                entry = MeshEntry(_array(arrays, "vertices", (None, 3), np.float64),
-                                  _array(arrays, "faces", (None, 3), np.int64),
+                entry = MeshEntry(arrayfile.checked(arrays, "vertices", np.float64, (None, 3)),
+                                  arrayfile.checked(arrays, "faces", np.int64, (None, 3)),
                                   MeshInfo.model_validate(meta["info"]))
                 loaded = entry, entry.nbytes
             else:
                 scene, meta, arrays = scene_file.load_with_extra(path)
                 info = SceneInfo.model_validate(meta["info"])
-                entry = SceneEntry(scene, _array(arrays, "colors", (len(scene), 3), np.float64),
-                                   info)
+                entry = SceneEntry(
+                    scene, arrayfile.checked(arrays, "colors", np.float64, (len(scene), 3)), info)
                 loaded = entry, info.bytes
         except FileNotFoundError:
             return None
@@ -131,13 +131,14 @@ class DataDir:
 
     def listing(self, kind):
         """``{id: (bytes, last used as seconds since the epoch)}`` of the ``kind`` files."""
-        return {path.name[:-len(_SUFFIX)]: (size, used) for path, size, used in self._files()
-                if path.parent.name == _FOLDERS[kind]}
+        return {path.name[:-len(_SUFFIX)]: (size, used)
+                for path, size, used in self._files((kind,))}
 
-    def _files(self):
-        """``(path, bytes, modification time)`` of every stored file (not temporaries)."""
+    def _files(self, kinds=tuple(_FOLDERS)):
+        """``(path, bytes, modification time)`` of every stored file of ``kinds`` (not
+        temporaries)."""
         found = []
-        for folder in _FOLDERS.values():
+        for folder in (_FOLDERS[kind] for kind in kinds):
             try:
                 entries = list(os.scandir(self.root / folder))
             except FileNotFoundError:  # the directory was emptied: nothing stored
@@ -167,7 +168,7 @@ class DataDir:
         """Remove temporary files that a writer killed mid-write left behind."""
         now = time.time()
         for folder in _FOLDERS.values():
-            for path in (self.root / folder).glob(".*.tmp"):
+            for path in (self.root / folder).glob(arrayfile.TEMPORARY_PATTERN):
                 try:
                     if now - path.stat().st_mtime > _STALE_SECONDS:
                         path.unlink()
@@ -184,12 +185,3 @@ def _touch(path):
     except FileNotFoundError:
         return False
     return True
-
-
-def _array(arrays, name, shape, dtype):
-    array = arrays.get(name)
-    if array is None or array.dtype != dtype or array.ndim != len(shape) or any(
-            want is not None and got != want
-            for got, want in zip(array.shape, shape, strict=True)):
-        raise ValueError(f"array {name!r} is missing or malformed")
-    return array
