@@ -7,10 +7,10 @@ exactly as the service does.  The library's ``ValueError``s become
 
 import numpy as np
 
-from raycore.camera import orthographic_rays, perspective_rays
 from raycore.render import render
 from service import codecs
 from service.errors import ClientError
+from service.sensors import camera_rays
 
 
 def run_query(scene, rays, options):
@@ -108,15 +108,10 @@ def render_image(scene, colors, spec):
         With the library's message for a degenerate camera or light.
     """
     camera = spec.camera
-    view = (camera.position, camera.look_at, camera.up)
     try:
-        size = (camera.width, camera.height, scene.dtype)
-        if camera.type == "perspective":
-            rays = perspective_rays(*view, camera.fov, *size)
-        else:
-            rays = orthographic_rays(*view, camera.view_height, *size)
-        return render(scene, *rays, camera.width, camera.height, spec.shading,
-                      light_direction=spec.light_direction, colors=colors,
+        rays = camera_rays(camera, scene.dtype)
+        return render(scene, rays.origins, rays.directions, camera.width, camera.height,
+                      spec.shading, light_direction=spec.light_direction, colors=colors,
                       background=np.asarray(spec.background), ambient=spec.ambient,
                       triangle_test=spec.triangle_test)
     except ValueError as error:

@@ -11,7 +11,6 @@ import zlib
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-import trimesh
 
 from service.errors import BadRequest, ClientError
 
@@ -235,7 +234,11 @@ def array_to_npy(array):
 
 def points_to_ply(points):
     """Binary PLY bytes of an (M, 3) point cloud (its vertices only), written by trimesh, which
-    stores them as float32 (as LiDAR point clouds usually are; .npy keeps the scene's dtype)."""
+    stores them as float32 (as LiDAR point clouds usually are; .npy keeps the scene's dtype).
+    trimesh is imported here, not with the module: the service and ``raycore cast`` start
+    without it (0.15 s)."""
+    import trimesh
+
     return trimesh.PointCloud(points).export(file_type="ply", encoding="binary")
 
 

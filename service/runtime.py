@@ -53,9 +53,9 @@ class Runtime:
             await asyncio.shield(self.startup)  # a client that leaves must not cancel startup
             entry = self.store.get(kind, key)
         if entry is None and self.disk is not None:
-            entry = await anyio.to_thread.run_sync(self._from_disk, kind, key)
-        elif self.disk is not None:
-            self.disk.touch(kind, key)
+            entry = await anyio.to_thread.run_sync(self.find, kind, key)
+        elif entry is not None:
+            self._used(kind, key)
         if entry is None:
             raise _not_found(kind, key)
         return entry
@@ -64,11 +64,16 @@ class Runtime:
         """:meth:`get` for worker threads: the entry from memory or the data directory, or
         None."""
         entry = self.store.get(kind, key)
-        if entry is None and self.disk is not None:
-            return self._from_disk(kind, key)
+        if entry is None:
+            return None if self.disk is None else self._from_disk(kind, key)
+        self._used(kind, key)
+        return entry
+
+    def _used(self, kind, key):
+        """Mark a memory hit as the entry's last use in the data directory too (its file's
+        time orders the eviction of every worker sharing the directory)."""
         if self.disk is not None:
             self.disk.touch(kind, key)
-        return entry
 
     def _from_disk(self, kind, key):
         loaded = self.disk.load(kind, key)

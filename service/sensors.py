@@ -31,19 +31,34 @@ def sensor_rays(spec, dtype, max_rays):
     """
     _check_maxima(spec, max_rays)
     try:
+        # (the points' counts are held to the limit by _check_maxima)
         if spec.type == "points":
-            _check_count(max(len(spec.sources), len(spec.targets)), max_rays)
             return sensors.points(spec.sources, spec.targets, dtype)
         if spec.type == "lidar":
             return _lidar(spec, dtype, max_rays)
         _check_count(spec.width * spec.height, max_rays, f"{spec.width}x{spec.height} pixels")
-        view = (spec.position, spec.look_at)
-        size = {"up": spec.up, "width": spec.width, "height": spec.height, "dtype": dtype}
-        if spec.type == "perspective":
-            return sensors.perspective(*view, fov=spec.fov, **size)
-        return sensors.orthographic(*view, spec.view_height, **size)
+        return camera_rays(spec, dtype)
     except ValueError as error:
         raise ClientError(f"body.rays: {error}") from error
+
+
+def camera_rays(camera, dtype):
+    """The rays of a camera: a render request's, or a ``"rays"`` camera (its subclass).
+
+    Returns
+    -------
+    raycore.sensors.SensorRays
+
+    Raises
+    ------
+    ValueError
+        The library's, for a degenerate camera.
+    """
+    view = (camera.position, camera.look_at)
+    size = {"up": camera.up, "width": camera.width, "height": camera.height, "dtype": dtype}
+    if camera.type == "perspective":
+        return sensors.perspective(*view, fov=camera.fov, **size)
+    return sensors.orthographic(*view, camera.view_height, **size)
 
 
 def _lidar(spec, dtype, max_rays):

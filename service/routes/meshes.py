@@ -94,8 +94,10 @@ async def upload_mesh(request: Request, response: Response,
 
 @router.get("", response_model=Listing, summary="List the stored meshes",
             responses=error_responses(422))
-async def list_meshes(state: Annotated[Runtime, Depends(runtime)], limit: Limit = 100,
-                      offset: Offset = 0):
+def list_meshes(state: Annotated[Runtime, Depends(runtime)], limit: Limit = 100,
+                offset: Offset = 0):
+    # a plain function, which FastAPI runs in a worker thread: the listing may read the data
+    # directory, off the event loop (as the delete below may remove a file)
     return page(state.listing("mesh"), limit, offset)
 
 
@@ -107,5 +109,5 @@ async def get_mesh(mesh_id: str, state: Annotated[Runtime, Depends(runtime)]):
 
 @guarded.delete("/{mesh_id}", status_code=204, summary="Forget an uploaded mesh",
                 responses=error_responses(404, 422))
-async def delete_mesh(mesh_id: str, state: Annotated[Runtime, Depends(runtime)]):
+def delete_mesh(mesh_id: str, state: Annotated[Runtime, Depends(runtime)]):
     state.delete("mesh", mesh_id)

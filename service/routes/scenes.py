@@ -97,7 +97,8 @@ async def create_scene(spec: SceneSpec, response: Response, state: State):
 @router.get("", response_model=Listing, summary="List the stored scenes",
             description="The demo scene is listed under its content id.",
             responses=error_responses(422))
-async def list_scenes(state: State, limit: Limit = 100, offset: Offset = 0):
+def list_scenes(state: State, limit: Limit = 100, offset: Offset = 0):
+    # run in a worker thread, off the event loop, as list_meshes
     return page(state.listing("scene"), limit, offset)
 
 
@@ -110,7 +111,7 @@ async def get_scene(scene_id: str, state: State):
 
 @guarded.delete("/{scene_id}", status_code=204, summary="Forget a scene",
                 responses=error_responses(404, 422))
-async def delete_scene(scene_id: str, state: State):
+def delete_scene(scene_id: str, state: State):
     state.delete("scene", scene_id)
 
 
