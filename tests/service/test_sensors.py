@@ -16,14 +16,13 @@ from .data import SETTINGS, SPEC, scene_in_process
 LIDAR = {"type": "lidar", "position": [0.1, 0.2, 0.3], "forward": [0.0, 0.0, 1.0],
          "up": [0.0, 1.0, 0.0], "vertical_fov": [-40.0, 30.0], "channels": 24,
          "horizontal_resolution": 5.0, "max_range": 6.0}
-#: LIDAR as raycore.sensors.lidar's arguments
-LIDAR_ARGUMENTS = {"forward": [0.0, 0.0, 1.0], "up": [0.0, 1.0, 0.0],
-                   "vertical_fov": [-40.0, 30.0], "channels": 24, "horizontal_resolution": 5.0,
-                   "max_range": 6.0}
+#: LIDAR as raycore.sensors.lidar's keyword arguments (the position goes first)
+LIDAR_ARGUMENTS = {name: value for name, value in LIDAR.items()
+                   if name not in ("type", "position")}
 
 
 def _lidar_in_process(dtype="float32"):
-    return sensors.lidar([0.1, 0.2, 0.3], **LIDAR_ARGUMENTS, dtype=dtype)
+    return sensors.lidar(LIDAR["position"], **LIDAR_ARGUMENTS, dtype=dtype)
 
 
 def _npy(response):
