@@ -13,7 +13,7 @@ import numpy as np
 
 from raycore.commands import CommandError, needs_service_extra, write_file
 from raycore.commands.progress import Progress
-from raycore.commands.scenes import check_file, load_scene
+from raycore.commands.scenes import add_scene_arguments, check_file, load_scene
 from raycore.hits import SURFACE_FIELDS
 
 #: Rays per call: a batch goes through in chunks of this many, so that the progress bar moves.
@@ -29,7 +29,7 @@ def add_parser(commands):
         description="Cast (N, 6) or (N, 8) rays (origin, direction[, tmin, tmax]; float32 or "
                     "float64 .npy) at a mesh file or a scene JSON, and write the answers as "
                     "the service's structured .npy.")
-    parser.add_argument("input", metavar="INPUT", help="mesh file or scene .json")
+    add_scene_arguments(parser)
     parser.add_argument("rays", metavar="RAYS.npy", help="(N, 6) or (N, 8) rays")
     parser.add_argument("-o", "--output", required=True, metavar="HITS.npy",
                         help=".npy file to write")
@@ -40,8 +40,6 @@ def add_parser(commands):
                         help="surface data of closest hits: uv, normal, point")
     parser.add_argument("--triangle-test", choices=["watertight", "moller", "geometric"],
                         default="watertight")
-    parser.add_argument("--dtype", choices=["float32", "float64"],
-                        help="the scene's precision (default: the JSON's, else float32)")
     parser.set_defaults(run=run)
 
 

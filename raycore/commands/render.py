@@ -9,7 +9,7 @@ from pathlib import Path
 
 from raycore.commands import CommandError, needs_service_extra, positive_int, write_file
 from raycore.commands.progress import Progress
-from raycore.commands.scenes import load_scene
+from raycore.commands.scenes import add_scene_arguments, load_scene
 
 #: The service's camera fields, by the options that give them (for messages).
 _OPTIONS = {"position": "--position", "look_at": "--look-at", "up": "--up", "fov": "--fov",
@@ -23,7 +23,7 @@ def add_parser(commands):
         description="Render a mesh file (obj, ply, stl, off, glb) or a scene JSON in the "
                     "service's format (mesh objects name files relative to it) to a PNG. "
                     "Without a camera, the whole scene is framed from a three-quarter view.")
-    parser.add_argument("input", metavar="INPUT", help="mesh file or scene .json")
+    add_scene_arguments(parser)
     parser.add_argument("-o", "--output", required=True, metavar="OUT.png",
                         help="PNG file to write")
     parser.add_argument("--width", type=positive_int, default=512, help="pixels (default 512)")
@@ -41,8 +41,6 @@ def add_parser(commands):
                         help="vertical field of view in degrees, perspective (default 45)")
     parser.add_argument("--shading", choices=["lambert", "normal", "depth", "id"],
                         default="lambert")
-    parser.add_argument("--dtype", choices=["float32", "float64"],
-                        help="the scene's precision (default: the JSON's, else float32)")
     parser.set_defaults(run=run)
 
 

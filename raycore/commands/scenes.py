@@ -58,6 +58,14 @@ def load_scene(path, dtype, progress):
     return scene, None
 
 
+def add_scene_arguments(parser):
+    """The arguments that :func:`load_scene` takes: ``INPUT`` (the first positional) and
+    ``--dtype``."""
+    parser.add_argument("input", metavar="INPUT", help="mesh file or scene .json")
+    parser.add_argument("--dtype", choices=["float32", "float64"],
+                        help="the scene's precision (default: the JSON's, else float32)")
+
+
 def check_file(path, where):
     """CommandError unless ``path`` is an existing file (``where`` names it in the message)."""
     if not path.exists():
