@@ -23,12 +23,15 @@ from raycore.hits import SURFACE_FIELDS
 from raycore.offset import offset_ray_origin
 from raycore.primitives.analytic import SPHERE_METHODS
 from raycore.primitives.triangle import TRIANGLE_TESTS
+from raycore.queries import GROUP_FROM
 from raycore.render import SHADINGS, render
 from raycore.scene import Scene
 
 DTYPES = ("float32", "float64")
 #: Rays per batch: one, a few, and enough for every path that large batches take.
 BATCH_SIZES = (1, 13, 4096)
+#: Rays per batch large enough to be traced in a coherent order (raycore.ray_order).
+GROUPED_BATCH = GROUP_FROM
 #: Surface fields asked of closest hits: none, each alone, all.
 FIELD_SETS = ((), *((name,) for name in SURFACE_FIELDS), SURFACE_FIELDS)
 
@@ -165,12 +168,16 @@ def _bounds(count, dtype):
 def _query_everything(scene):
     """Every query, triangle test, sphere method and set of fields, with scalar and per-ray
     bounds, on batches of every size."""
-    for count in BATCH_SIZES:
+    for count in (*BATCH_SIZES, GROUPED_BATCH):
         origins, directions = _rays(count, scene.dtype)
+        # a grouped batch takes the others' kernels, and its own for the reordering, which the
+        # triangle test and sphere method do not change
+        tests = TRIANGLE_TESTS if count in BATCH_SIZES else ["watertight"]
+        methods = SPHERE_METHODS if count in BATCH_SIZES else ["precise"]
         for tmin, tmax in _bounds(count, scene.dtype):
             rays = (origins, directions, tmin, tmax)
-            for test in TRIANGLE_TESTS:
-                for method in SPHERE_METHODS:
+            for test in tests:
+                for method in methods:
                     options = {"triangle_test": test, "sphere_method": method}
                     for fields in FIELD_SETS:
                         scene.intersect(*rays, fields=fields, **options)

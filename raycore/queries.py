@@ -30,6 +30,7 @@ from raycore.bvh.traverse import (
 )
 from raycore.primitives.analytic import analytic_surface
 from raycore.primitives.triangle import triangle_normal
+from raycore.ray_order import gather_rays, group_order, ungroup
 
 #: Rays per parallel work item: enough to amortise a call's set-up, few enough to balance cores.
 #: A batch of fewer than ITEMS_PER_THREAD * CHUNK rays per thread is cut into smaller items, down
@@ -43,6 +44,11 @@ ITEMS_PER_THREAD = 2
 #: work items cut down to MIN_CHUNK rays: 256 rays took 34-35 us on one thread and 31-37 on two;
 #: 512 rays 64-65 and 49-52 us; 1024 rays 125-127 and 79-94 us (142 as one item of CHUNK rays).
 SERIAL_BELOW = 512
+
+#: Batches from this size on are traced in a coherent order when they are incoherent
+#: (:mod:`raycore.ray_order`), in pieces of PARTS_PER_THREAD per thread.
+GROUP_FROM = 65536
+PARTS_PER_THREAD = 2
 
 
 @njit(cache=True, parallel=True, _nrt=False)
@@ -143,11 +149,45 @@ def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, o
                  int_scratch, real_scratch, capacity)
     if serial:
         return _trace_here(*arguments)
+    if len(origins) >= GROUP_FROM:
+        order = np.empty(len(origins), np.int64)
+        keys = np.empty(len(origins), np.int16)
+        if group_order(origins, directions, PARTS_PER_THREAD * threads, order, keys):
+            return _trace_grouped(order, arguments, threads)
+    return _trace_in_chunks(arguments, threads)
+
+
+def _trace_in_chunks(arguments, threads):
+    """Run :func:`_trace_in_parallel` on ``trace``'s arguments."""
     # one chunk per scheduling step: rays cost very different amounts (a miss is ten times
     # cheaper than a hit), and static halves would leave one core idle
-    size = min(CHUNK, max(MIN_CHUNK, len(origins) // (ITEMS_PER_THREAD * threads)))
+    size = min(CHUNK, max(MIN_CHUNK, len(arguments[4]) // (ITEMS_PER_THREAD * threads)))
     with parallel_chunksize(1):
         return _trace_in_parallel(*arguments, size)
+
+
+def _trace_grouped(order, arguments, threads):
+    """Trace the rays in ``order`` (:func:`raycore.ray_order.group_order`): on copies of them,
+    into answers in that order, which are then put back in the batch's order."""
+    (scene, mode, test, method, origins, directions, tmin, tmax, *outputs, offsets, hits_t,
+     hits_obj, hits_prim, int_scratch, real_scratch, capacity) = arguments
+    n = len(order)
+    # NumPy's arrays, not Numba's: see group_order; bounds shared by every ray stay shared
+    rays = (np.empty_like(origins), np.empty_like(directions),
+            np.empty_like(tmin) if len(tmin) == n else tmin,
+            np.empty_like(tmax) if len(tmax) == n else tmax)
+    gather_rays(order, origins, directions, tmin, tmax, *rays)
+    grouped = [np.empty_like(out) for out in outputs]
+    if mode == ALL:
+        # each ray's crossings still go to the ray's own place in the hit buffers
+        offsets = offsets[order]
+    first_bad = _trace_in_chunks((scene, mode, test, method, *rays, *grouped, offsets, hits_t,
+                                  hits_obj, hits_prim, int_scratch, real_scratch, capacity),
+                                 threads)
+    for out, answer in zip(outputs, grouped, strict=True):
+        if len(out):
+            ungroup(order, answer, out)
+    return order[first_bad] if first_bad < n else n
 
 
 def closest_hits(scene, rays, test, sphere_method, barycentrics):
