@@ -18,6 +18,10 @@ $(BIN)/python:
 $(VENV)/.dev-installed: pyproject.toml | $(BIN)/python
 	@# Open3D (tests/integrations/test_open3d.py) links against the system's libusb-1.0.
 	@ldconfig -p | grep -q libusb-1.0 || (apt-get update -qq && apt-get install -y -qq libusb-1.0-0)
+	@# The viewer's and the docs' browser tests (tests/service/test_viewer.py) drive Debian's
+	@# Chromium through Playwright, which downloads no browser of its own.
+	@test -x /usr/bin/chromium || (apt-get update -qq && \
+	    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver)
 	$(BIN)/python -m pip install --quiet -e ".[service,oracle,dev]"
 	touch $@
 

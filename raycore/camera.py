@@ -1,4 +1,5 @@
-"""Camera rays: one ray per pixel centre, in scanline order (row 0 at the top of the image).
+"""Camera rays: one ray per pixel centre, in scanline order (row 0 at the top of the image), or
+several per pixel, jittered within strata of it, for anti-aliasing.
 
 The camera looks from ``position`` towards ``look_at``; ``up`` fixes the roll (it need not be
 perpendicular to the view direction, only not parallel to it).  Image x grows to the right of
@@ -38,6 +39,93 @@ def _pixel_grid(width, height):
     return x, y
 
 
+#: Most rays per pixel that a camera makes.
+MAX_SAMPLES = 64
+
+
+def strata(samples):
+    """How ``samples`` rays split a pixel: rows of equal height, each cut into equal cells.
+
+    ``ceil(sqrt(samples))`` cells a row; the last row holds what is left, so that every
+    sample has a stratum of its own and the strata tile the pixel.
+
+    Returns
+    -------
+    rows : int
+    columns : int
+        Cells of every row but the last.
+    weights : ndarray of float64, shape (samples,)
+        Each sample's stratum's area: the weights of an unbiased pixel mean.
+    """
+    if not isinstance(samples, (int, np.integer)) or not 1 <= samples <= MAX_SAMPLES:
+        raise ValueError(f"samples must be an integer in [1, {MAX_SAMPLES}], got {samples!r}")
+    columns = int(np.ceil(np.sqrt(samples)))
+    rows = -(-samples // columns)
+    last = samples - columns * (rows - 1)
+    weights = np.full(samples, 1.0 / (rows * columns))
+    weights[columns * (rows - 1):] = 1.0 / (rows * last)
+    return rows, columns, weights
+
+
+@njit(inline="always")
+def _hash01(index, seed):
+    """A uniform number in [0, 1) from a 64-bit integer hash (splitmix64's finaliser) of
+    ``index`` and ``seed``: the same jitter for the same ray on every run and thread."""
+    z = np.uint64(index) * np.uint64(0x9E3779B97F4A7C15) + np.uint64(seed)
+    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    z = z ^ (z >> np.uint64(31))
+    return float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)  # 53 bits
+
+
+@njit(cache=True, parallel=True)
+def _sample_rays_kernel(center, right, up, x_scale, y_scale, width, height, samples, rows,
+                        columns, seed, unit, constant, points, constants):
+    """:func:`_plane_rays_kernel` for ``samples`` jittered rays per pixel, pixel by pixel: ray
+    ``(h * width + w) * samples + s`` goes through a random point of sample ``s``'s stratum
+    (see :func:`strata`); image coordinates in [-1, 1] are scaled by ``x_scale``, ``y_scale``."""
+    last = samples - columns * (rows - 1)
+    for h in prange(height):
+        for w in range(width):
+            pixel = h * width + w
+            for s in range(samples):
+                row = s // columns
+                cells = columns if row < rows - 1 else last
+                ray = pixel * samples + s
+                sx = (s - row * columns + _hash01(2 * ray, seed)) / cells
+                sy = (row + _hash01(2 * ray + 1, seed)) / rows
+                across = ((w + sx) / width * 2 - 1) * x_scale
+                rise = (1 - (h + sy) / height * 2) * y_scale
+                x = center[0] + across * right[0] + rise * up[0]
+                y = center[1] + across * right[1] + rise * up[1]
+                z = center[2] + across * right[2] + rise * up[2]
+                if unit:
+                    length = np.sqrt(x * x + y * y + z * z)
+                    x, y, z = x / length, y / length, z / length
+                points[ray, 0] = x
+                points[ray, 1] = y
+                points[ray, 2] = z
+                for k in range(3):
+                    constants[ray, k] = constant[k]
+
+
+def _camera_rays(center, right, up, x_scale, y_scale, width, height, constant, dtype, samples,
+                 seed, unit):
+    """The image plane's rays, one per pixel centre or ``samples`` per pixel (see
+    :func:`_plane_rays` and :func:`_sample_rays_kernel`); ``x_scale`` and ``y_scale`` are the
+    plane's half extents."""
+    x, y = _pixel_grid(width, height)
+    rows, columns, _ = strata(samples)
+    if samples == 1:  # pixel centres, not jittered
+        return _plane_rays(center, right, up, x * x_scale, y * y_scale, constant, dtype, unit)
+    points = np.empty((width * height * samples, 3), dtype)
+    constants = np.empty_like(points)
+    _sample_rays_kernel(center, right, up, float(x_scale), float(y_scale), width, height,
+                        samples, rows, columns, np.uint64(seed), unit, constant, points,
+                        constants)
+    return points, constants
+
+
 def _plane_rays(center, right, up, across, rise, constant, dtype, unit=False):
     """Rays of an image plane, in scanline order, both (H*W, 3) of ``dtype``: the points
     ``center + across[w] * right + rise[h] * up`` (computed in float64, rounded once, scaled to
@@ -72,7 +160,8 @@ def _check_fov(fov):
         raise ValueError(f"fov must be in (0, 180) degrees, got {fov!r}")
 
 
-def perspective_rays(position, look_at, up, fov, width, height, dtype="float64"):
+def perspective_rays(position, look_at, up, fov, width, height, dtype="float64", samples=1,
+                     seed=0):
     """Pinhole camera rays.
 
     Parameters
@@ -84,11 +173,17 @@ def perspective_rays(position, look_at, up, fov, width, height, dtype="float64")
         Image size in pixels.
     dtype : {"float64", "float32"}
         Precision of the rays: that of the scene they go to saves it a conversion.
+    samples : int
+        Rays per pixel, in [1, MAX_SAMPLES]: one through its centre, or each through a random
+        point of its own stratum of the pixel (:func:`strata`).
+    seed : int
+        Of the jitter: the same seed gives the same rays.
 
     Returns
     -------
-    origins, directions : ndarray, shape (height * width, 3)
-        Every origin is ``position``; directions are unit length.
+    origins, directions : ndarray, shape (height * width * samples, 3)
+        Every origin is ``position``; directions are unit length.  Pixel by pixel, a pixel's
+        samples together.
 
     Raises
     ------
@@ -97,17 +192,16 @@ def perspective_rays(position, look_at, up, fov, width, height, dtype="float64")
     """
     _check_fov(fov)
     position, right, true_up, forward = _frame(position, look_at, up)
-    x, y = _pixel_grid(width, height)
-    # offsets on the image plane at distance 1, per column and per row
-    across = x * np.tan(np.radians(fov) / 2) * width / height
-    rise = y * np.tan(np.radians(fov) / 2)
-    dtype = resolve_dtype(dtype)
-    directions, origins = _plane_rays(forward, right, true_up, across, rise, position, dtype,
-                                      unit=True)
+    # the image plane at distance 1
+    half_height = np.tan(np.radians(fov) / 2)
+    directions, origins = _camera_rays(forward, right, true_up, half_height * width / height,
+                                       half_height, width, height, position,
+                                       resolve_dtype(dtype), samples, seed, unit=True)
     return origins, directions
 
 
-def orthographic_rays(position, look_at, up, view_height, width, height, dtype="float64"):
+def orthographic_rays(position, look_at, up, view_height, width, height, dtype="float64",
+                      samples=1, seed=0):
     """Parallel rays from a view plane through ``position``, perpendicular to it.
 
     Parameters
@@ -119,10 +213,12 @@ def orthographic_rays(position, look_at, up, view_height, width, height, dtype="
         Image size in pixels.
     dtype : {"float64", "float32"}
         Precision of the rays.
+    samples, seed : int
+        Rays per pixel and their jitter, as for :func:`perspective_rays`.
 
     Returns
     -------
-    origins, directions : ndarray, shape (height * width, 3)
+    origins, directions : ndarray, shape (height * width * samples, 3)
         Origins on the view plane; every direction is the unit view direction.
 
     Raises
@@ -133,11 +229,9 @@ def orthographic_rays(position, look_at, up, view_height, width, height, dtype="
     if not (np.isfinite(view_height) and view_height > 0):
         raise ValueError(f"view_height must be positive and finite, got {view_height!r}")
     position, right, true_up, forward = _frame(position, look_at, up)
-    x, y = _pixel_grid(width, height)
-    across = x * view_height / 2 * width / height
-    rise = y * view_height / 2
-    dtype = resolve_dtype(dtype)
-    return _plane_rays(position, right, true_up, across, rise, forward, dtype)
+    return _camera_rays(position, right, true_up, view_height / 2 * width / height,
+                        view_height / 2, width, height, forward, resolve_dtype(dtype), samples,
+                        seed, unit=False)
 
 
 #: Where the framing camera looks from, seen from the scene's centre: in front (+z), to the right

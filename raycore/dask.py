@@ -121,14 +121,15 @@ def intersect(scene, origins, directions, tmin=0.0, tmax=np.inf, *, triangle_tes
     -------
     dict of str to dask.array.Array
         ``t`` (N,), ``geom_id`` and ``prim_id`` (N,) int64, and each of ``fields``: ``uv``
-        (N, 2), ``normal`` and ``point`` (N, 3).
+        (N, 2), ``normal``, ``point`` and ``shading_normal`` (N, 3).
     """
     fields = check_fields(fields)
     options = {"triangle_test": triangle_test, "sphere_method": sphere_method, "fields": fields}
     real = np.dtype(scene.dtype)
     specs = {"t": (real, (), True), "geom_id": (np.int64, (), True),
              "prim_id": (np.int64, (), True), "uv": (real, (2,), True),
-             "normal": (real, (3,), True), "point": (real, (3,), True)}
+             "normal": (real, (3,), True), "point": (real, (3,), True),
+             "shading_normal": (real, (3,), True)}
     parts = _run(_chunk_intersect, scene, origins, directions, tmin, tmax, options)
     return _fields(parts, {name: specs[name] for name in ("t", "geom_id", "prim_id", *fields)})
 

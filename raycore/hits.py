@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numpy as np
 
 #: Surface fields a closest-hit query can be asked for, besides t and the ids it always returns.
-SURFACE_FIELDS = ("uv", "normal", "point")
+SURFACE_FIELDS = ("uv", "normal", "point", "shading_normal")
 
 
 def check_fields(fields):
@@ -36,6 +36,10 @@ class Hits:
         Unit geometric normal (facing is not flipped towards the ray); NaN where missed.
     point : ndarray, shape (N, 3), or None
         Hit point ``origin + t * direction``; NaN where missed.
+    shading_normal : ndarray, shape (N, 3), or None
+        Unit normal for smooth shading: on meshes, their vertex normals (see
+        :mod:`raycore.shading`) interpolated with the barycentrics; the geometric normal on
+        analytic shapes; on the geometric normal's side.  NaN where missed.
     """
 
     t: np.ndarray
@@ -44,6 +48,7 @@ class Hits:
     uv: np.ndarray | None = None
     normal: np.ndarray | None = None
     point: np.ndarray | None = None
+    shading_normal: np.ndarray | None = None
 
     @property
     def hit(self):

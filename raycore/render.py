@@ -1,14 +1,21 @@
-"""Shading of camera-ray hits into 8-bit RGB images.
+"""Shading of camera-ray hits into sRGB-encoded 8-bit images.
 
 Shadings: ``depth`` (near is bright), ``normal`` (the normal facing the camera, mapped from
 [-1, 1] to [0, 255]), ``lambert`` (a directional light with hard shadows: one occlusion ray per
 lit hit), ``id`` (a colour per geometry id).  Misses get the background colour.
+
+Each ray's colour is made in linear light (lambert's albedos are linear; the other shadings'
+colours, like the background, are display values, decoded from sRGB), a pixel's samples are
+averaged there, weighted by their strata (:func:`raycore.camera.strata`), and the mean is
+encoded to sRGB once.  Meshes are shaded smooth, from their vertex normals
+(:mod:`raycore.shading`), unless asked not to be.
 """
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, vectorize
 
 from raycore._fp import like
+from raycore.camera import strata
 from raycore.offset import offset_constants, offset_coordinate
 
 SHADINGS = ("depth", "normal", "lambert", "id")
@@ -23,24 +30,30 @@ DEFAULT_COLOR = (0.8, 0.8, 0.8)
 _POINT_ERROR_EPS = 16
 
 
-def render(scene, origins, directions, width, height, shading="lambert", *,
-           light_direction=DEFAULT_LIGHT, colors=None, background=(0, 0, 0), ambient=0.15,
-           triangle_test="watertight"):
+def render(scene, origins, directions, width, height, shading="lambert", *, samples=1,
+           smooth=True, light_direction=DEFAULT_LIGHT, colors=None, background=(0, 0, 0),
+           ambient=0.15, triangle_test="watertight"):
     """Trace camera rays through ``scene`` and shade the closest hits.
 
     Parameters
     ----------
     scene : raycore.Scene
-    origins, directions : array_like, shape (height * width, 3)
-        Camera rays in scanline order (see :mod:`raycore.camera`).
+    origins, directions : array_like, shape (height * width * samples, 3)
+        Camera rays pixel by pixel in scanline order, a pixel's samples together, as
+        :mod:`raycore.camera` makes them.
     width, height : int
     shading : {"depth", "normal", "lambert", "id"}
+    samples : int
+        Rays per pixel, averaged in linear light with the weights of their strata.
+    smooth : bool
+        Shade meshes with their interpolated vertex normals (``normal``, ``lambert``); their
+        geometric (face) normals when False.
     light_direction : array_like, shape (3,)
         Direction towards the light (``lambert``); any length but zero.
     colors : array_like, shape (G, 3), optional
         Linear RGB in [0, 1] of each geometry id (``lambert``); grey by default.
     background : array_like, shape (3,)
-        RGB in [0, 255] of pixels whose ray missed.
+        sRGB in [0, 255] of pixels whose rays missed.
     ambient : float
         Light that reaches shadowed and back-facing surfaces (``lambert``), in [0, 1].
     triangle_test : {"watertight", "moller", "geometric"}
@@ -48,6 +61,7 @@ def render(scene, origins, directions, width, height, shading="lambert", *,
     Returns
     -------
     ndarray of uint8, shape (height, width, 3)
+        sRGB-encoded.
 
     Raises
     ------
@@ -58,42 +72,119 @@ def render(scene, origins, directions, width, height, shading="lambert", *,
         raise ValueError(f"shading must be one of {SHADINGS}, got {shading!r}")
     if not 0 <= ambient <= 1:
         raise ValueError(f"ambient must be in [0, 1], got {ambient!r}")
+    _, _, weights = strata(samples)
     # in the scene's precision, which the shadow rays start from
     origins = np.asarray(origins, dtype=scene.dtype)
     directions = np.asarray(directions, dtype=scene.dtype)
-    if origins.shape != (width * height, 3):
-        raise ValueError(f"origins must have shape ({width * height}, 3) for a {width}x{height} "
-                         f"image, got {origins.shape}")
+    rays = width * height * samples
+    if origins.shape != (rays, 3):
+        raise ValueError(f"origins must have shape ({rays}, 3) for a {width}x{height} image of "
+                         f"{samples} samples a pixel, got {origins.shape}")
     if shading == "lambert":
         light = _unit_light(light_direction)
         colors = _color_table(colors, len(scene))
-    fields = ("normal",) if shading in ("normal", "lambert") else ()
+    fields = ()
+    if shading in ("normal", "lambert"):
+        fields = ("normal", "shading_normal") if smooth else ("normal",)
     hits = scene.intersect(origins, directions, triangle_test=triangle_test, fields=fields)
+    shading_normal = hits.shading_normal if smooth else hits.normal
     hit = hits.hit
-    image = np.empty((len(hit), 3), np.uint8)
-    image[:] = np.asarray(background, np.uint8)
+    linear = np.empty((rays, 3), np.float32)
+    linear[:] = srgb_to_linear(np.asarray(background, np.float64) / 255)
     if shading == "depth":
-        image[hit] = _depth(hits.t[hit])[:, None]
+        linear[hit] = srgb_to_linear(_depth(hits.t[hit]))[:, None]
     elif shading == "id":
-        image[hit] = _id_colors(hits.geom_id[hit])
+        linear[hit] = srgb_to_linear(_id_colors(hits.geom_id[hit]) / 255)
     elif shading == "normal":
-        facing = np.empty_like(hits.normal)
-        _facing_normals(directions, hits.normal, facing)
-        image[hit] = np.round((facing[hit] * 0.5 + 0.5) * 255)
+        _normal_colors(directions, hits.normal, shading_normal, linear)
     else:
-        count = len(hit)
-        cosine = np.empty(count)
-        shadow_origins = np.empty((count, 3), scene.dtype)
+        cosine = np.empty(rays)
+        shadow_origins = np.empty((rays, 3), scene.dtype)
         shadow_directions = np.empty_like(shadow_origins)
-        shadow_tmax = np.empty(count, scene.dtype)
+        shadow_tmax = np.empty(rays, scene.dtype)
         error_eps = _POINT_ERROR_EPS * float(np.finfo(scene.dtype).eps)
-        _shadow_rays(origins, directions, hits.t, hits.normal, light, error_eps,
+        _shadow_rays(origins, directions, hits.t, hits.normal, shading_normal, light, error_eps,
                      *offset_constants(scene.dtype), cosine, shadow_origins,
                      shadow_directions, shadow_tmax)
         shadowed = scene.occluded(shadow_origins, shadow_directions, 0.0, shadow_tmax,
                                   triangle_test=triangle_test)
-        _shade_lambert(colors, hits.geom_id, cosine, shadowed, float(ambient), image)
+        _shade_lambert(colors, hits.geom_id, cosine, shadowed, float(ambient), linear)
+    image = np.empty((width * height, 3), np.uint8)
+    _resolve(linear, weights, image)
     return image.reshape(height, width, 3)
+
+
+#: What :func:`render_arrays` gives for each shading but lambert.
+ARRAY_SHADINGS = ("depth", "normal", "id")
+
+
+def render_arrays(scene, origins, directions, width, height, shading, *, smooth=True,
+                  triangle_test="watertight"):
+    """The data behind a ``depth``, ``normal`` or ``id`` picture, one value per pixel.
+
+    Parameters
+    ----------
+    scene : raycore.Scene
+    origins, directions : array_like, shape (height * width, 3)
+        One ray per pixel (through its centre), in scanline order.
+    width, height : int
+    shading : {"depth", "normal", "id"}
+    smooth : bool
+        ``normal``: the shading normal (see :class:`raycore.hits.Hits`) rather than the
+        geometric one.
+    triangle_test : {"watertight", "moller", "geometric"}
+
+    Returns
+    -------
+    ndarray
+        ``depth``: (height, width) hit t (the distance along unit directions), inf for misses;
+        ``normal``: (height, width, 3) unit normals as intersect gives them (not turned to the
+        camera), NaN for misses; ``id``: (height, width) int32 geometry ids, -1 for misses.
+    """
+    if shading not in ARRAY_SHADINGS:
+        raise ValueError(f"shading must be one of {ARRAY_SHADINGS} for arrays, got {shading!r}")
+    if np.shape(origins) != (width * height, 3):
+        raise ValueError(f"origins must have shape ({width * height}, 3) for a {width}x{height} "
+                         f"image, got {np.shape(origins)}")
+    field = "shading_normal" if smooth else "normal"
+    hits = scene.intersect(origins, directions, triangle_test=triangle_test,
+                           fields=(field,) if shading == "normal" else ())
+    if shading == "depth":
+        return hits.t.reshape(height, width)
+    if shading == "id":
+        return hits.geom_id.astype(np.int32).reshape(height, width)
+    return getattr(hits, field).reshape(height, width, 3)
+
+
+@vectorize(["float64(float64)"], cache=True)
+def srgb_to_linear(encoded):
+    """Linear light of sRGB values (IEC 61966-2-1), both in [0, 1], any shape."""
+    if encoded <= 0.04045:
+        return encoded / 12.92
+    return ((encoded + 0.055) / 1.055) ** 2.4
+
+
+@njit(inline="always")
+def _encode(linear):
+    """sRGB value in [0, 1] of a linear one, clamped to [0, 1] (IEC 61966-2-1)."""
+    linear = min(max(linear, 0.0), 1.0)
+    if linear <= 0.0031308:
+        return 12.92 * linear
+    return 1.055 * linear ** (1 / 2.4) - 0.055
+
+
+@njit(cache=True, parallel=True)
+def _resolve(linear, weights, image):
+    """Each pixel's samples (rows of ``linear``, (P * S, 3)), weighted, averaged and encoded
+    to 8-bit sRGB in ``image`` (P, 3)."""
+    samples = len(weights)
+    for p in prange(len(image)):
+        for k in range(3):
+            total = 0.0
+            for s in range(samples):
+                total += weights[s] * linear[p * samples + s, k]
+            # rounded to nearest: the value is not negative, so truncation is floor
+            image[p, k] = np.uint8(int(_encode(total) * 255.0 + 0.5))
 
 
 def _unit_light(light_direction):
@@ -122,19 +213,23 @@ def _facing_side(normals, directions, i):
 
 
 @njit(cache=True, parallel=True)
-def _facing_normals(directions, normals, facing):
-    """Normals of hits turned to face the camera (NaN rows of misses stay NaN)."""
+def _normal_colors(directions, normals, shading, linear):
+    """Linear colours of hits' shading normals turned to face the camera (the side of their
+    geometric ``normals``), mapped from [-1, 1] to sRGB [0, 1]; misses are left alone."""
     for i in prange(len(normals)):
+        if not normals[i, 0] == normals[i, 0]:  # NaN: a miss
+            continue
         side = _facing_side(normals, directions, i)
         for k in range(3):
-            facing[i, k] = side * normals[i, k]
+            linear[i, k] = srgb_to_linear(min(max(side * shading[i, k] * 0.5 + 0.5, 0.0),
+                                              1.0))
 
 
 @njit(cache=True, parallel=True, error_model="numpy")
-def _shadow_rays(origins, directions, t, normals, light, error_eps, near, float_scale,
-                 int_scale, cosine, shadow_origins, shadow_directions, shadow_tmax):
-    """Per camera ray, in one pass: the cosine of its hit's normal (facing the camera) to the
-    light, and its shadow ray towards the light.
+def _shadow_rays(origins, directions, t, normals, shading, light, error_eps, near,
+                 float_scale, int_scale, cosine, shadow_origins, shadow_directions, shadow_tmax):
+    """Per camera ray, in one pass: the cosine of its hit's shading normal (turned to the
+    camera as its geometric normal is) to the light, and its shadow ray towards the light.
 
     The shadow ray starts at the hit point moved off the surface, to the lit side, first by the
     point's error bound along the normal (the point ``origin + t * direction`` is off by a few
@@ -149,7 +244,7 @@ def _shadow_rays(origins, directions, t, normals, light, error_eps, near, float_
             side = _facing_side(normals, directions, i)
             for k in range(3):
                 normal = side * normals[i, k]
-                lit += normal * light[k]
+                lit += side * shading[i, k] * light[k]
                 reach += abs(normal) * error_eps * (abs(origins[i, k])
                                                     + abs(distance * directions[i, k]))
         cosine[i] = lit
@@ -166,8 +261,8 @@ def _shadow_rays(origins, directions, t, normals, light, error_eps, near, float_
 
 
 @njit(cache=True, parallel=True)
-def _shade_lambert(colors, geom_id, cosine, shadowed, ambient, image):
-    """Colours of hits (misses are left alone): albedo * (ambient + direct light)."""
+def _shade_lambert(colors, geom_id, cosine, shadowed, ambient, linear):
+    """Linear colours of hits (misses are left alone): albedo * (ambient + direct light)."""
     for i in prange(len(geom_id)):
         # read once: the compiler cannot tell that the image does not overlap geom_id, and
         # reloading it for every channel made this loop 2.5x slower
@@ -177,17 +272,15 @@ def _shade_lambert(colors, geom_id, cosine, shadowed, ambient, image):
         lit = cosine[i] > 0 and not shadowed[i]
         intensity = ambient + (1.0 - ambient) * (cosine[i] if lit else 0.0)
         for k in range(3):
-            value = min(max(colors[geometry, k] * intensity, 0.0), 1.0)
-            # rounded to nearest: value is not negative, so truncation is floor (and twice as
-            # fast as np.floor here)
-            image[i, k] = np.uint8(int(value * 255.0 + 0.5))
+            linear[i, k] = colors[geometry, k] * intensity
 
 
 def _depth(t):
-    """Grey levels of hit distances: 255 at the nearest hit, 51 at the farthest."""
+    """sRGB grey levels in [0, 1] of hit distances: 1 at the nearest hit, 0.2 at the
+    farthest."""
     near, far = t.min(initial=np.inf), t.max(initial=-np.inf)
     scale = (t - near) / (far - near) if far > near else np.zeros_like(t)
-    return np.round(255 * (1 - 0.8 * scale)).astype(np.uint8)
+    return 1 - 0.8 * scale
 
 
 def _id_colors(geom_id):

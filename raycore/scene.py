@@ -22,6 +22,7 @@ from raycore.mesh import Mesh, affine_inverse, affine_product, validate_transfor
 from raycore.primitives import analytic, box, cone, cylinder, disk, plane, sphere
 from raycore.primitives.triangle import WATERTIGHT, triangle_test_code
 from raycore.rays import as_float_array, ray_arrays, refuse, resolve_dtype
+from raycore.shading import NormalTables, shading_normals
 
 #: Directions for ``contains``: a majority vote over three rays makes the parity test robust to a
 #: ray that grazes a mesh (touches it without crossing).  Irrational-looking components keep them
@@ -78,6 +79,7 @@ class Scene:
         self._top_slots = None  # (S,) int64: the object in each of the top tree's leaf slots
         self._direct = None  # (D,) int64: objects tested before the tree (unbounded, or lone)
         self.build_seconds = 0.0
+        self._normal_tables = None  # (record, raycore.shading.NormalTables) once smooth-shaded
 
     # ------------------------------------------------------------------ geometry
 
@@ -301,8 +303,8 @@ class Scene:
         tmin, tmax : float or array_like of shape (N,)
         triangle_test : {"watertight", "moller", "geometric"}
         sphere_method : {"precise", "geometric", "analytic"}
-        fields : iterable of {"uv", "normal", "point"}
-            Surface data to compute besides t and the ids.
+        fields : iterable of {"uv", "normal", "point", "shading_normal"}
+            Surface data to compute besides t and the ids (see :class:`raycore.hits.Hits`).
 
         Returns
         -------
@@ -318,12 +320,25 @@ class Scene:
         if not fields:
             return Hits(t, obj, prim)
         u, v, slot = surface
+        smooth = "shading_normal" in fields  # interpolated with uv, normal where not a mesh
         uv, normal, point = queries.surface_fields(
-            self._record, rays[0], rays[1], t, obj, slot, u, v, "uv" in fields,
-            "normal" in fields, "point" in fields)
-        surface = {name: value for name, value in
-                   (("uv", uv), ("normal", normal), ("point", point)) if name in fields}
-        return Hits(t=t, geom_id=obj, prim_id=prim, **surface)
+            self._record, rays[0], rays[1], t, obj, slot, u, v, smooth or "uv" in fields,
+            smooth or "normal" in fields, "point" in fields)
+        surface = {"uv": uv, "normal": normal, "point": point}
+        if smooth:
+            surface["shading_normal"] = self._shading_normals(obj, prim, uv, normal)
+        return Hits(t=t, geom_id=obj, prim_id=prim,
+                    **{name: surface[name] for name in fields})
+
+    def _shading_normals(self, geom_id, prim_id, uv, normal):
+        """:func:`raycore.shading.shading_normals` of hits, with the meshes' vertex normals
+        made once per built scene."""
+        record = self._record
+        if self._normal_tables is None or self._normal_tables[0] is not record:
+            self._normal_tables = (record, NormalTables(
+                self._meshes, self._kind, self._mesh_of, self._xform_row, self._xforms,
+                self.dtype))
+        return shading_normals(self._normal_tables[1], geom_id, prim_id, uv, normal)
 
     def occluded(self, origins, directions, tmin=0.0, tmax=np.inf, *,
                  triangle_test="watertight", sphere_method="precise"):

@@ -31,32 +31,32 @@ class SensorRays(NamedTuple):
 
 
 def perspective(position, look_at, up=(0.0, 1.0, 0.0), fov=45.0, width=512, height=512,
-                dtype="float64"):
-    """Pinhole camera rays, one per pixel in scanline order, from
+                dtype="float64", samples=1, seed=0):
+    """Pinhole camera rays, ``samples`` per pixel in scanline order, from
     :func:`raycore.camera.perspective_rays` (see there for the arguments).
 
     Returns
     -------
     SensorRays
-        (width * height, 3) origins and unit directions; tmin 0, tmax inf.
+        (width * height * samples, 3) origins and unit directions; tmin 0, tmax inf.
     """
-    return SensorRays(*perspective_rays(position, look_at, up, fov, width, height, dtype),
-                      0.0, np.inf)
+    return SensorRays(*perspective_rays(position, look_at, up, fov, width, height, dtype,
+                                        samples, seed), 0.0, np.inf)
 
 
 def orthographic(position, look_at, view_height, up=(0.0, 1.0, 0.0), width=512, height=512,
-                 dtype="float64"):
-    """Parallel camera rays, one per pixel in scanline order, from
+                 dtype="float64", samples=1, seed=0):
+    """Parallel camera rays, ``samples`` per pixel in scanline order, from
     :func:`raycore.camera.orthographic_rays` (see there for the arguments).
 
     Returns
     -------
     SensorRays
-        (width * height, 3) origins on the view plane and the unit view direction; tmin 0,
-        tmax inf.
+        (width * height * samples, 3) origins on the view plane and the unit view direction;
+        tmin 0, tmax inf.
     """
     return SensorRays(*orthographic_rays(position, look_at, up, view_height, width, height,
-                                         dtype), 0.0, np.inf)
+                                         dtype, samples, seed), 0.0, np.inf)
 
 
 class LidarPreset(NamedTuple):

@@ -7,9 +7,9 @@ exactly as the service does.  The library's ``ValueError``s become
 
 import numpy as np
 
-from raycore.render import render
+from raycore.render import ARRAY_SHADINGS, render, render_arrays
 from service import codecs
-from service.errors import ClientError
+from service.errors import ClientError, NotAcceptable
 from service.sensors import camera_rays
 
 
@@ -89,7 +89,8 @@ def lidar_answer(scene, rays, options, point_cloud, accept):
 
 
 def render_image(scene, colors, spec):
-    """The image of a render request: its camera's rays, traced and shaded.
+    """The image of a render request: its camera's rays (``spec.samples`` per pixel), traced
+    and shaded.
 
     Parameters
     ----------
@@ -109,10 +110,40 @@ def render_image(scene, colors, spec):
     """
     camera = spec.camera
     try:
-        rays = camera_rays(camera, scene.dtype)
+        rays = camera_rays(camera, scene.dtype, spec.samples)
         return render(scene, rays.origins, rays.directions, camera.width, camera.height,
-                      spec.shading, light_direction=spec.light_direction, colors=colors,
+                      spec.shading, samples=spec.samples, smooth=spec.smooth,
+                      light_direction=spec.light_direction, colors=colors,
                       background=np.asarray(spec.background), ambient=spec.ambient,
                       triangle_test=spec.triangle_test)
+    except ValueError as error:
+        raise ClientError(str(error)) from error
+
+
+def render_data(scene, spec):
+    """The .npy answer of a depth, normal or id render request: the data of one ray per pixel
+    centre (:func:`raycore.render.render_arrays`).
+
+    Returns
+    -------
+    memoryview
+        The .npy file's bytes.
+
+    Raises
+    ------
+    NotAcceptable
+        For a lambert render, which has no data but its picture.
+    ClientError
+        With the library's message for a degenerate camera.
+    """
+    if spec.shading not in ARRAY_SHADINGS:
+        raise NotAcceptable(f"a {spec.shading} render is answered as image/png only; .npy "
+                            f"answers are for {', '.join(ARRAY_SHADINGS)}")
+    camera = spec.camera
+    try:
+        rays = camera_rays(camera, scene.dtype)
+        return codecs.array_to_npy(render_arrays(
+            scene, rays.origins, rays.directions, camera.width, camera.height, spec.shading,
+            smooth=spec.smooth, triangle_test=spec.triangle_test))
     except ValueError as error:
         raise ClientError(str(error)) from error

@@ -23,7 +23,7 @@ from service.demo import load_demo
 from service.errors import ClientError, validation_detail
 from service.methods import Methods
 from service.openapi import document
-from service.routes import health, meshes, scenes
+from service.routes import health, meshes, pages, scenes
 from service.runtime import Runtime
 from service.schemas import error_responses
 from service.store import Store
@@ -34,9 +34,10 @@ DESCRIPTION = """Ray queries and renders over HTTP, answered by `raycore.Scene`.
 
 Upload meshes (`POST /v1/meshes`), build scenes from JSON (`POST /v1/scenes`), then cast ray
 batches at them (`POST /v1/scenes/{id}/intersect`, JSON or .npy both ways) or render PNGs
-(`POST /v1/scenes/{id}/render`).  Scene and mesh ids are content hashes; `demo` names a built-in
-scene.  Errors are answered as `{"detail": "..."}` with a 4xx status.  This document describes
-the running service: its limits (`RAYCORE_*`) are the schemas' maxima.
+(`POST /v1/scenes/{id}/render`); look at them in the viewer page, `/viewer`.  Scene and mesh ids
+are content hashes; `demo` names a built-in scene.  Errors are answered as `{"detail": "..."}`
+with a 4xx status.  This document describes the running service: its limits (`RAYCORE_*`) are
+the schemas' maxima.
 """
 
 #: Added to the description when an API key is configured (and the operations say so).
@@ -84,9 +85,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     settings = load_settings() if settings is None else settings
     _tune_malloc()
     keyed = settings.api_key is not None
+    # the docs page is served by routes.pages, with assets of its own rather than a CDN's
     app = FastAPI(title="raycore", version=version("raycore"),
                   description=DESCRIPTION + (KEY_DESCRIPTION if keyed else ""),
-                  lifespan=_lifespan)
+                  lifespan=_lifespan, docs_url=None, redoc_url=None)
     disk = None if settings.data_dir is None else DataDir(settings.data_dir, settings.data_bytes)
     app.state.runtime = Runtime(settings, Store(settings.store_bytes), disk)
     app.add_middleware(Methods)
@@ -97,8 +99,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_exception_handler(StarletteHTTPException, _http_error)
     app.add_exception_handler(RequestValidationError, _invalid_request)
     app.add_exception_handler(Exception, _unexpected)
-    for module in (health, meshes, scenes):
+    for module in (health, meshes, scenes, pages):
         app.include_router(module.router)
+    app.mount(pages.STATIC_URL, pages.static_files())
     # the routes that change the store need the key, and the document declares its security,
     # only when a key is configured
     guard = {"dependencies": [Depends(require_api_key)],

@@ -132,7 +132,7 @@ class Client:
         tmin, tmax : float or array_like of shape (N,), optional
             Defaults 0 and no limit.
         query : {"closest", "any", "all", "count"}
-        fields : sequence of {"uv", "normal", "point"}
+        fields : sequence of {"uv", "normal", "point", "shading_normal"}
             Surface data of closest hits.
         triangle_test : {"watertight", "moller", "geometric"}
 

@@ -12,6 +12,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from raycore.hits import SURFACE_FIELDS
 from service.errors import BadRequest, ClientError
 
 NPY = "application/x-npy"
@@ -172,7 +173,7 @@ def result_columns(query, result):
         return {"ray_index": result.ray_index, "t": result.t, "geom_id": result.geom_id,
                 "prim_id": result.prim_id, "counts": result.counts}
     columns = {"t": result.t, "geom_id": result.geom_id, "prim_id": result.prim_id}
-    for name in ("uv", "normal", "point"):
+    for name in SURFACE_FIELDS:
         if getattr(result, name) is not None:
             columns[name] = getattr(result, name)
     return columns

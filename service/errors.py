@@ -29,6 +29,12 @@ class LimitExceeded(ClientError):
     status = 413
 
 
+class NotAcceptable(ClientError):
+    """The Accept header asks for an answer type that the request cannot have (406)."""
+
+    status = 406
+
+
 class UnsupportedMedia(ClientError):
     """The body's content type is not one the endpoint reads (415)."""
 

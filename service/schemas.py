@@ -15,6 +15,7 @@ from typing import Annotated, Literal
 
 from pydantic import AfterValidator, BaseModel, ConfigDict, Field, model_validator
 
+from raycore.camera import MAX_SAMPLES
 from raycore.sensors import LIDAR_PRESETS
 
 #: Bound of every coordinate and length a request gives (Embree's range, 1.844e18): squares and
@@ -48,7 +49,7 @@ Matrix = Annotated[list[Row], AfterValidator(_affine), Field(
 DType = Literal["float32", "float64"]
 TriangleTest = Literal["watertight", "moller", "geometric"]
 QueryKind = Literal["closest", "any", "all", "count"]
-SurfaceField = Literal["uv", "normal", "point"]
+SurfaceField = Literal["uv", "normal", "point", "shading_normal"]
 Unit = Annotated[float, Field(ge=0, le=1)]
 Byte = Annotated[int, Field(ge=0, le=255)]
 
@@ -227,9 +228,11 @@ class QueryOptions(Strict):
     query: QueryKind = Field("closest", description=(
         "closest: the nearest hit; any: whether anything is hit (occlusion); all: every hit "
         "along each ray, sorted by t; count: the number of hits"))
-    fields: Annotated[list[SurfaceField], Field(max_length=3)] = Field(
+    fields: Annotated[list[SurfaceField], Field(max_length=4)] = Field(
         [], description="Surface data of closest hits to return besides t and the ids (only "
-                        "with query=closest)")
+                        "with query=closest): uv (barycentrics on triangles), normal (the unit "
+                        "geometric normal), point, shading_normal (mesh vertex normals "
+                        "interpolated with the barycentrics; the geometric normal elsewhere)")
     triangle_test: TriangleTest = "watertight"
 
 
@@ -365,6 +368,7 @@ class IntersectResponse(BaseModel):
     uv: list[Annotated[list[float], Field(min_length=2, max_length=2)] | None] | None = None
     normal: list[Point | None] | None = None
     point: list[Point | None] | None = None
+    shading_normal: list[Point | None] | None = None
     occluded: list[bool] | None = None
     count: list[int] | None = None
     counts: list[int] | None = None
@@ -383,10 +387,17 @@ class IntersectResponse(BaseModel):
 
 
 class RenderRequest(Strict):
-    """A camera and a shading; answered with a PNG."""
+    """A camera and a shading; answered with an sRGB PNG, or for depth, normal and id with the
+    data as .npy when the Accept header asks for application/x-npy."""
 
     camera: Annotated[PerspectiveCamera | OrthographicCamera, Field(discriminator="type")]
     shading: Literal["depth", "normal", "lambert", "id"] = "lambert"
+    samples: Annotated[int, Field(ge=1, le=MAX_SAMPLES)] = Field(1, description=(
+        "Rays per pixel, each jittered within a stratum of the pixel, averaged in linear light "
+        "(anti-aliasing); .npy answers trace one ray per pixel centre"))
+    smooth: bool = Field(True, description=(
+        "Shade meshes with their vertex normals interpolated across faces (normal, lambert; "
+        "and the .npy normals); their face normals when false"))
     light_direction: Vec3 = Field((0.4, 1.0, 0.6),
                                   description="Towards the light (lambert); not zero")
     ambient: Unit = 0.15
@@ -397,7 +408,7 @@ class RenderRequest(Strict):
     model_config = ConfigDict(json_schema_extra={"examples": [{
         "camera": {"type": "perspective", "position": [6, 4, -8], "look_at": [0, 1, 0],
                    "up": [0, 1, 0], "fov": 45, "width": 512, "height": 384},
-        "shading": "lambert", "light_direction": [0.4, 1.0, 0.6]}]})
+        "shading": "lambert", "samples": 4, "light_direction": [0.4, 1.0, 0.6]}]})
 
 
 # ---------------------------------------------------------------------- listings
@@ -460,6 +471,9 @@ _ERROR_EXAMPLES = {
           {"detail": "the body did not all arrive within 60 s, the limit"}),
     413: ("Over a configured limit",
           {"detail": "2500000 rays in one request; the limit is 2097152"}),
+    406: ("No such answer type for this request",
+          {"detail": "a lambert render is answered as image/png only; .npy answers are for "
+                     "depth, normal and id"}),
     415: ("Unreadable content type",
           {"detail": "Content-Type must be application/json or application/x-npy, got text/plain"}),
     422: ("Invalid request",

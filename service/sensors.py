@@ -42,8 +42,9 @@ def sensor_rays(spec, dtype, max_rays):
         raise ClientError(f"body.rays: {error}") from error
 
 
-def camera_rays(camera, dtype):
-    """The rays of a camera: a render request's, or a ``"rays"`` camera (its subclass).
+def camera_rays(camera, dtype, samples=1, seed=0):
+    """The rays of a camera: a render request's (``samples`` per pixel), or a ``"rays"``
+    camera (its subclass).
 
     Returns
     -------
@@ -55,7 +56,8 @@ def camera_rays(camera, dtype):
         The library's, for a degenerate camera.
     """
     view = (camera.position, camera.look_at)
-    size = {"up": camera.up, "width": camera.width, "height": camera.height, "dtype": dtype}
+    size = {"up": camera.up, "width": camera.width, "height": camera.height, "dtype": dtype,
+            "samples": samples, "seed": seed}
     if camera.type == "perspective":
         return sensors.perspective(*view, fov=camera.fov, **size)
     return sensors.orthographic(*view, camera.view_height, **size)

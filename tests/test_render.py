@@ -5,9 +5,17 @@ import pytest
 
 from raycore import Scene
 from raycore.camera import orthographic_rays, perspective_rays
-from raycore.render import DEFAULT_COLOR, render
+from raycore.render import DEFAULT_COLOR, render, render_arrays
 
 SIZE = 96
+
+
+def _srgb8(linear):
+    """8-bit sRGB of linear values, by IEC 61966-2-1's formula."""
+    linear = np.clip(np.asarray(linear, np.float64), 0, 1)
+    encoded = np.where(linear <= 0.0031308, 12.92 * linear,
+                       1.055 * linear ** (1 / 2.4) - 0.055)
+    return np.floor(encoded * 255 + 0.5).astype(np.uint8)
 
 
 def _sphere_scene(dtype="float32"):
@@ -64,8 +72,8 @@ def test_lambert_shadow_of_a_sphere_on_a_plane_without_acne(dtype, offset):
                                             8.0, SIZE, SIZE)
     image = render(scene, origins, directions, SIZE, SIZE, "lambert", light_direction=[0, 1, 0],
                    ambient=0.2)
-    floor = np.round(np.asarray(DEFAULT_COLOR) * 255).astype(np.uint8)
-    shadow = np.round(np.asarray(DEFAULT_COLOR) * 0.2 * 255).astype(np.uint8)
+    floor = _srgb8(DEFAULT_COLOR)
+    shadow = _srgb8(np.asarray(DEFAULT_COLOR) * 0.2)
     # the sphere hides its own shadow from this camera: look past it, along the plane
     radial = np.hypot(*np.meshgrid(np.arange(SIZE) - (SIZE - 1) / 2,
                                    np.arange(SIZE) - (SIZE - 1) / 2))
@@ -112,3 +120,162 @@ def test_bad_arguments_name_themselves(change, name):
     args = {"width": SIZE, "height": SIZE, "shading": "lambert", **change}
     with pytest.raises(ValueError, match=name):
         render(_sphere_scene(), *_front_view(), **args)
+
+
+def test_lambert_is_srgb_encoded():
+    """Squares facing the camera and the light, of albedos across the range (the formula's
+    linear segment included): each pixel is the albedo encoded to sRGB."""
+    albedos = [0.002, 0.01, 0.05, 0.2, 0.5, 0.9]
+    scene = Scene()
+    for i in range(len(albedos)):
+        scene.add_box([i, 0.0, 0.0], [i + 1.0, 1.0, 1.0])
+    colors = np.repeat(np.asarray(albedos)[:, None], 3, axis=1)
+    width, height = 8 * len(albedos), 8
+    rays = orthographic_rays([len(albedos) / 2, 0.5, -5.0], [len(albedos) / 2, 0.5, 0.0],
+                             [0.0, 1.0, 0.0], 1.0, width, height)
+    image = render(scene, *rays, width, height, "lambert", colors=colors,
+                   light_direction=[0.0, 0.0, -1.0], ambient=0.0)
+    # camera right is -x looking down +z: the first box is on the right
+    for i, albedo in enumerate(albedos):
+        column = width - 1 - (8 * i + 4)
+        np.testing.assert_array_equal(image[4, column], _srgb8([albedo] * 3))
+
+
+def _half_plane_scene():
+    """A triangle covering the view where x < 0.3 + 0.4 y (an oblique edge)."""
+    scene = Scene(dtype="float64")
+    scene.add_mesh([[-10.0, -10.0, 0.0], [-3.7, -10.0, 0.0], [4.3, 10.0, 0.0]], [[0, 1, 2]])
+    return scene
+
+
+def _edge_coverage(width, height, view, fine=64):
+    """Each pixel's exact-enough covered fraction of ``_half_plane_scene``'s triangle, from a
+    fine grid of points per pixel (independent of the camera's jitter)."""
+    offsets = (np.arange(fine) + 0.5) / fine
+    x = (np.arange(width)[:, None] + offsets[None, :]) / width * view - view / 2
+    y = view / 2 - (np.arange(height)[:, None] + offsets[None, :]) / height * view
+    # the view looks down +z from -z with up +y: image x grows towards -x
+    world_x = -x
+    edge_x = 0.3 + 0.4 * y
+    inside = world_x[None, None, :, :] < edge_x[:, :, None, None]
+    return inside.mean(axis=(1, 3))
+
+
+def test_samples_reduce_edge_aliasing_averaged_in_linear_light():
+    size, view = 32, 2.0
+    scene = _half_plane_scene()
+    expected = _srgb8(_edge_coverage(size, size, view))
+    errors = {}
+    for samples in (1, 16):
+        rays = orthographic_rays([0.0, 0.0, -5.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], view, size,
+                                 size, samples=samples)
+        image = render(scene, *rays, size, size, "lambert", samples=samples,
+                       colors=[[1.0, 1.0, 1.0]], ambient=1.0)
+        errors[samples] = np.abs(image[..., 0].astype(float) - expected).mean()
+        again = render(scene, *rays, size, size, "lambert", samples=samples,
+                       colors=[[1.0, 1.0, 1.0]], ambient=1.0)
+        np.testing.assert_array_equal(image, again)  # deterministic
+    edge = (expected > 0) & (expected < 255)
+    assert edge.sum() >= size  # the edge crosses every row
+    assert errors[16] < errors[1] / 3
+    # averaged in linear light: a half-covered pixel is sRGB 188, not 128 (a display mean)
+    rays = orthographic_rays([0.0, 0.0, -5.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], view, size,
+                             size, samples=16)
+    image = render(scene, *rays, size, size, "lambert", samples=16, colors=[[1.0, 1.0, 1.0]],
+                   ambient=1.0)[..., 0].astype(float)
+    coverage = _edge_coverage(size, size, view)
+    display_mean = np.round(255 * coverage)
+    assert np.abs(image - expected)[edge].mean() < np.abs(image - display_mean)[edge].mean() / 4
+
+
+def test_camera_samples_are_stratified_and_seeded():
+    rays = perspective_rays([0, 0, -4], [0, 0, 0], [0, 1, 0], 40.0, 3, 2, samples=5)
+    assert rays[0].shape == (30, 3)
+    other = perspective_rays([0, 0, -4], [0, 0, 0], [0, 1, 0], 40.0, 3, 2, samples=5, seed=1)
+    assert not np.array_equal(rays[1], other[1])
+    # orthographic: the origins of one pixel's samples, each in its own stratum
+    origins, _ = orthographic_rays([0, 0, 0], [0, 0, 1], [0, 1, 0], 2.0, 1, 1, samples=9)
+    # camera right is -x looking down +z; image y is +y
+    x, y = (1 - origins[:, 0]) / 2, (1 - origins[:, 1]) / 2
+    cells = np.floor(x * 3).astype(int) + 3 * np.floor(y * 3).astype(int)
+    np.testing.assert_array_equal(np.sort(cells), np.arange(9))
+
+
+def _icosphere():
+    import trimesh
+
+    mesh = trimesh.creation.icosphere(subdivisions=1)
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces)
+
+
+def test_shading_normal_interpolates_vertex_normals():
+    vertices, faces = _icosphere()
+    scene = Scene(dtype="float64")
+    mesh = scene.add_mesh(vertices, faces)
+    placed = np.array([[2.0, 0.0, 0.0, 4.0], [0.0, 1.0, 0.5, 0.0], [0.0, 0.0, 1.0, 0.0],
+                       [0.0, 0.0, 0.0, 1.0]])
+    instance = scene.add_instance(mesh, placed)
+    sphere = scene.add_sphere([-3.0, 0.0, 0.0], 1.0)
+    rays = perspective_rays([0.5, 0.3, -9.0], [0.5, 0.0, 0.0], [0, 1, 0], 50.0, 80, 40)
+    hits = scene.intersect(*rays, fields=("uv", "normal", "shading_normal"))
+    assert {mesh, instance, sphere} <= set(hits.geom_id.tolist()) and -1 in hits.geom_id
+    # area-weighted vertex normals, computed here
+    corners = vertices[faces]
+    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normals = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(normals, faces[:, k], cross)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    on_mesh = (hits.geom_id == mesh) | (hits.geom_id == instance)
+    u, v = hits.uv[on_mesh, 0:1], hits.uv[on_mesh, 1:2]
+    face = faces[hits.prim_id[on_mesh]]
+    expected = (1 - u - v) * normals[face[:, 0]] + u * normals[face[:, 1]] + v * normals[
+        face[:, 2]]
+    inverse_transpose = np.linalg.inv(placed[:3, :3]).T
+    placed_rows = hits.geom_id[on_mesh] == instance
+    expected[placed_rows] = expected[placed_rows] @ inverse_transpose.T
+    expected /= np.linalg.norm(expected, axis=1, keepdims=True)
+    np.testing.assert_allclose(hits.shading_normal[on_mesh], expected, atol=1e-12)
+    # not the face normals: smooth
+    assert np.abs(hits.shading_normal[on_mesh] - hits.normal[on_mesh]).max() > 0.05
+    elsewhere = ~on_mesh
+    np.testing.assert_array_equal(hits.shading_normal[elsewhere], hits.normal[elsewhere])
+
+
+def test_smooth_shading_hides_the_facets():
+    """Lambert of a coarse sphere mesh, smooth: neighbouring pixels differ as little as on the
+    analytic sphere; flat: the facets' edges show as steps."""
+    vertices, faces = _icosphere()
+    rays = _front_view()
+    steps = {}
+    for name in ("smooth", "flat", "analytic"):
+        scene = Scene()
+        if name == "analytic":
+            scene.add_sphere([0.0, 0.0, 0.0], 1.0)
+        else:
+            scene.add_mesh(vertices, faces)
+        image = render(scene, *rays, SIZE, SIZE, "lambert", smooth=name != "flat",
+                       light_direction=[0.5, 0.4, -1.0]).astype(int)[..., 0]
+        centre = image[SIZE // 2 - 12:SIZE // 2 + 12, SIZE // 2 - 12:SIZE // 2 + 12]
+        steps[name] = max(np.abs(np.diff(centre, axis=0)).max(),
+                          np.abs(np.diff(centre, axis=1)).max())
+    assert steps["smooth"] <= steps["analytic"] + 2
+    assert steps["flat"] > 3 * steps["smooth"]
+
+
+@pytest.mark.parametrize("shading", ["depth", "normal", "id"])
+@pytest.mark.parametrize("smooth", [True, False])
+def test_render_arrays_are_intersect_answers(shading, smooth):
+    vertices, faces = _icosphere()
+    scene = Scene()
+    scene.add_mesh(vertices, faces)
+    scene.add_plane([0.0, -1.0, 0.0], [0.0, 1.0, 0.0])
+    rays = perspective_rays([0.0, 1.0, -4.0], [0.0, 0.0, 0.0], [0, 1, 0], 50.0, 24, 16,
+                            "float32")
+    data = render_arrays(scene, *rays, 24, 16, shading, smooth=smooth)
+    hits = scene.intersect(*rays, fields=("normal", "shading_normal"))
+    expected = {"depth": hits.t.reshape(16, 24),
+                "id": hits.geom_id.reshape(16, 24),
+                "normal": (hits.shading_normal if smooth else hits.normal).reshape(16, 24, 3)}
+    np.testing.assert_array_equal(data, expected[shading])
+    assert data.dtype == (np.int32 if shading == "id" else np.float32)

@@ -13,7 +13,7 @@ from raycore.commands.scenes import add_scene_arguments, load_scene
 
 #: The service's camera fields, by the options that give them (for messages).
 _OPTIONS = {"position": "--position", "look_at": "--look-at", "up": "--up", "fov": "--fov",
-            "width": "--width", "height": "--height"}
+            "width": "--width", "height": "--height", "samples": "--samples"}
 
 
 def add_parser(commands):
@@ -41,6 +41,10 @@ def add_parser(commands):
                         help="vertical field of view in degrees, perspective (default 45)")
     parser.add_argument("--shading", choices=["lambert", "normal", "depth", "id"],
                         default="lambert")
+    parser.add_argument("--samples", type=positive_int, default=4,
+                        help="rays per pixel, averaged (anti-aliasing; default 4)")
+    parser.add_argument("--flat", action="store_true",
+                        help="shade meshes with their face normals, not smooth")
     parser.set_defaults(run=run)
 
 
@@ -71,7 +75,8 @@ def run(args):
                       else {"view_height": view_height})
         try:
             # the service's checks of a render request, and its render
-            spec = RenderRequest(camera=camera, shading=args.shading)
+            spec = RenderRequest(camera=camera, shading=args.shading, samples=args.samples,
+                                 smooth=not args.flat)
         except ValidationError as error:
             problems = [{**problem, "loc": problem["loc"][-1:]} for problem in error.errors()]
             raise CommandError(_named(validation_detail(problems))) from error

@@ -12,7 +12,7 @@ from fastapi.exceptions import RequestValidationError
 from pydantic import ValidationError
 
 from service import codecs
-from service.answers import encode_columns, lidar_answer, render_image, run_query
+from service.answers import encode_columns, lidar_answer, render_data, render_image, run_query
 from service.bodies import read_body
 from service.builder import build_scene, scene_id
 from service.demo import DEMO_CAMERA
@@ -216,9 +216,18 @@ def _with_url_options(request, options, in_url):
 
 
 _RENDER = (
-    "Rules that the schema does not state: width x height is at most the configured pixel "
-    "limit (413); look_at differs from position, up is not parallel to the view direction, and "
-    "light_direction is not zero (422).")
+    "An sRGB PNG: each pixel the mean, in linear light, of `samples` rays jittered within "
+    "strata of it; meshes shaded smooth from their vertex normals unless `smooth` is false. "
+    "With `Accept: application/x-npy`, depth, normal and id renders answer with their data "
+    "instead, one ray per pixel centre, as .npy: depth an (H, W) array of t (inf for misses), "
+    "normal (H, W, 3) unit normals as intersect's normal or shading_normal (NaN for misses), "
+    "id (H, W) int32 geometry ids (-1 for misses); a lambert render asked for .npy is answered "
+    "406.\n\n"
+    "Rules that the schema does not state: width x height x samples is at most the configured "
+    "pixel limit (413); look_at differs from position, up is not parallel to the view "
+    "direction, and light_direction is not zero (422).")
+_NPY_RENDER = ("<.npy bytes: depth (H, W) float, normal (H, W, 3) float in the scene's "
+               "precision, or id (H, W) int32>")
 
 
 @router.post(
@@ -227,21 +236,26 @@ _RENDER = (
     openapi_extra={"requestBody": {"content": {"application/json": {"examples": {
         "demo": {"summary": "The demo scene, lit, with shadows",
                  "value": {"camera": DEMO_CAMERA, "shading": "lambert"}}}}}}},
-    responses={200: {"description": "The image", "content": {
-        "image/png": {"schema": _BINARY, "example": "<PNG bytes>"}}},
-        **error_responses(400, 404, 408, 413, 422)})
-async def render_scene(scene_id: str, spec: RenderRequest, state: State):
+    responses={200: {"description": "The image, or its data", "content": {
+        "image/png": {"schema": _BINARY, "example": "<PNG bytes>"},
+        codecs.NPY: {"schema": _BINARY, "example": _NPY_RENDER}}},
+        **error_responses(400, 404, 406, 408, 413, 422)})
+async def render_scene(scene_id: str, spec: RenderRequest, request: Request, state: State):
     entry = await state.get("scene", scene_id)
     camera = spec.camera
     pixels, limit = camera.width * camera.height, state.settings.max_render_pixels
     for side in ("width", "height"):  # the document's maxima: invalid, not too large
         if getattr(camera, side) > limit:
             raise ClientError(f"body.camera.{side}: at most {limit}, the pixel limit")
-    if pixels > limit:
-        raise LimitExceeded(f"{camera.width}x{camera.height} is {pixels} pixels; the limit is "
-                            f"{limit}")
+    if pixels * spec.samples > limit:
+        raise LimitExceeded(f"{camera.width}x{camera.height} pixels x {spec.samples} samples "
+                            f"is {pixels * spec.samples} rays; the limit is {limit}")
+    data = codecs.accepts_npy(request.headers.get("accept", ""))
 
     def draw():
-        return codecs.png(render_image(entry.scene, entry.colors, spec))
+        if data:
+            return render_data(entry.scene, spec), codecs.NPY
+        return codecs.png(render_image(entry.scene, entry.colors, spec)), "image/png"
 
-    return Response(await state.compute(draw), media_type="image/png")
+    content, media_type = await state.compute(draw)
+    return Response(content, media_type=media_type)

@@ -1,0 +1,106 @@
+"""What a render costs beyond tracing its rays: ``python -m benchmarks.render_cost``.
+
+A 512x512 lambert render with shadows and 4 samples a pixel (the issue's bar), of the service's
+demo scene and of the shared stanford-bunny, shaded smooth.  Tracing is timed on the very rays
+the render traces: its camera rays' closest hits (no surface fields) and its shadow rays,
+captured from a render.  Everything else (ray generation, surface fields and shading normals,
+shadow-ray set-up, shading, the linear-light mean of the samples, sRGB encoding) is the render's
+own cost.  Render and tracing are timed in interleaved rounds, best of each; writes
+``benchmarks/results/render_cost.json``.
+"""
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.meshes import load
+from benchmarks.timing import interleaved_best_times
+from raycore import Scene
+from raycore.camera import frame_box, perspective_rays
+from raycore.render import render
+from service.builder import build_scene
+from service.demo import DEMO_CAMERA, demo_spec
+
+RESULTS = Path(__file__).resolve().parent / "results" / "render_cost.json"
+SIZE, SAMPLES = 512, 4
+
+
+class _ShadowRays:
+    """``scene`` whose ``occluded`` keeps the arguments of its last call (the shadow rays)."""
+
+    def __init__(self, scene):
+        self.scene, self.shadow = scene, None
+
+    def __getattr__(self, name):
+        return getattr(self.scene, name)
+
+    def __len__(self):
+        return len(self.scene)
+
+    def occluded(self, *args, **options):
+        self.shadow = (args, options)
+        return self.scene.occluded(*args, **options)
+
+
+def measure(name, scene, colors, position, look_at, rounds):
+    """Best render and tracing times of one scene, and their ratio."""
+    origins, directions = perspective_rays(position, look_at, (0.0, 1.0, 0.0), 45.0, SIZE, SIZE,
+                                           scene.dtype, samples=SAMPLES)
+    captured = _ShadowRays(scene)
+    render(captured, origins, directions, SIZE, SIZE, samples=SAMPLES, colors=colors)
+    shadow_args, shadow_options = captured.shadow
+
+    def full_render():
+        # the camera rays are made inside the timed call, as the service makes them
+        rays = perspective_rays(position, look_at, (0.0, 1.0, 0.0), 45.0, SIZE, SIZE,
+                                scene.dtype, samples=SAMPLES)
+        return render(scene, *rays, SIZE, SIZE, samples=SAMPLES, colors=colors)
+
+    def tracing():
+        scene.intersect(origins, directions)
+        return scene.occluded(*shadow_args, **shadow_options)
+
+    def tracing_with_normals():
+        scene.intersect(origins, directions, fields=("normal",))
+        return scene.occluded(*shadow_args, **shadow_options)
+
+    best, _ = interleaved_best_times({"render": full_render, "tracing": tracing,
+                                      "tracing_with_normals": tracing_with_normals}, rounds)
+    hit = float(np.mean(scene.intersect(origins, directions).hit))
+    lit = float(np.mean(shadow_args[3] >= 0))
+    return {"scene": name, "size": f"{SIZE}x{SIZE}", "samples": SAMPLES,
+            "rays": len(origins), "hit_fraction": round(hit, 3),
+            "shadow_rays_traced_fraction": round(lit, 3),
+            "render_s": round(best["render"], 4), "tracing_s": round(best["tracing"], 4),
+            "tracing_with_normals_s": round(best["tracing_with_normals"], 4),
+            "render_over_tracing": round(best["render"] / best["tracing"], 3),
+            "overhead_over_tracing": round(best["render"] / best["tracing"] - 1, 3),
+            "overhead_over_tracing_with_normals": round(
+                best["render"] / best["tracing_with_normals"] - 1, 3)}
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=5)
+    args = parser.parse_args(argv)
+    entry, _ = build_scene(demo_spec(), lambda mesh: None, 10**8)
+    rows = [measure("demo", entry.scene, entry.colors, DEMO_CAMERA["position"],
+                    DEMO_CAMERA["look_at"], args.rounds)]
+    bunny = Scene("float32")
+    bunny.add_mesh(*load("stanford-bunny"))
+    position, look_at, _ = frame_box(*bunny.bounds, SIZE, SIZE)
+    rows.append(measure("stanford-bunny", bunny, None, position, look_at, args.rounds))
+    for row in rows:
+        print(f"{row['scene']}: render {row['render_s'] * 1000:.0f} ms, tracing "
+              f"{row['tracing_s'] * 1000:.0f} ms ({row['tracing_with_normals_s'] * 1000:.0f} ms "
+              f"with normals): render / tracing {row['render_over_tracing']}, the render's own "
+              f"cost {row['overhead_over_tracing']}x tracing "
+              f"({row['overhead_over_tracing_with_normals']}x with normals)")
+    RESULTS.write_text(json.dumps({"threads": os.cpu_count(), "rows": rows}, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()
