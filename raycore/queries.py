@@ -26,6 +26,7 @@ from raycore.bvh.traverse import (
     MESH,
     PARITY,
     new_scratch,
+    slot_value,
     trace_range,
 )
 from raycore.primitives.analytic import analytic_surface
@@ -277,14 +278,13 @@ def all_hits(scene, rays, test, sphere_method):
     return first_bad, counts, *hits
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
-def surface_fields(scene, origins, directions, t, obj, slot, u, v, want_uv, want_normal,
+def surface_fields(record, origins, directions, t, obj, slot, u, v, want_uv, want_normal,
                    want_point):
     """Surface data of closest hits, computed after traversal and only for the asked fields.
 
     Parameters
     ----------
-    scene : SceneRecord
+    record : SceneRecord
     origins, directions : ndarray, shape (N, 3)
     t : ndarray, shape (N,)
     obj, slot : ndarray of int64, shape (N,)
@@ -300,25 +300,42 @@ def surface_fields(scene, origins, directions, t, obj, slot, u, v, want_uv, want
         NaN rows for misses; empty when not asked for.
     """
     n = len(t)
-    nan = like(t[0], np.nan) if n else np.nan
+    # NumPy's arrays (huge pages; see raycore.ray_order.group_order), filled without reference
+    # counts: a view per ray (a parameter row, a leaf block) made the pass 10x slower with them
     uv = np.empty((n if want_uv else 0, 2), t.dtype)
     normal = np.empty((n if want_normal else 0, 3), t.dtype)
     point = np.empty((n if want_point else 0, 3), t.dtype)
+    _fill_surface_fields(record, origins, directions, t, obj, slot, u, v, uv, normal, point)
+    return uv, normal, point
+
+
+@njit(cache=True)
+def _fill_surface_fields(record, origins, directions, t, obj, slot, u, v, uv, normal, point):
+    _surface_fields(arrays_of(record), origins, directions, t, obj, slot, u, v, uv, normal, point)
+
+
+@njit(cache=True, parallel=True, error_model="numpy", _nrt=False)
+def _surface_fields(scene, origins, directions, t, obj, slot, u, v, uv, normal, point):
+    """Fill the rows of ``uv``, ``normal`` and ``point`` (each N rows, or none) for each ray."""
+    n = len(t)
+    want_uv, want_normal, want_point = len(uv) == n, len(normal) == n, len(point) == n
     blocks = scene.blocks
     for i in prange(n):
-        o = origins[i]
-        d = directions[i]
         if obj[i] < 0:
-            if want_uv:
-                uv[i, :] = nan
-            if want_normal:
-                normal[i, :] = nan
-            if want_point:
-                point[i, :] = nan
-            continue
-        if want_point:
             for a in range(3):
-                point[i, a] = o[a] + t[i] * d[a]
+                if want_uv and a < 2:
+                    uv[i, a] = np.nan
+                if want_normal:
+                    normal[i, a] = np.nan
+                if want_point:
+                    point[i, a] = np.nan
+            continue
+        ox, oy, oz = origins[i, 0], origins[i, 1], origins[i, 2]
+        dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
+        if want_point:
+            point[i, 0] = ox + t[i] * dx
+            point[i, 1] = oy + t[i] * dy
+            point[i, 2] = oz + t[i] * dz
         k = scene.kind[obj[i]]
         if k == MESH:
             if want_uv:
@@ -326,24 +343,25 @@ def surface_fields(scene, origins, directions, t, obj, slot, u, v, want_uv, want
                 uv[i, 1] = v[i]
             if want_normal:
                 s = slot[i]
-                w = blocks[s // 4, s % 4::4]
-                nx, ny, nz = triangle_normal(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7],
-                                             w[8])
+                nx, ny, nz = triangle_normal(
+                    slot_value(blocks, s, 0), slot_value(blocks, s, 1), slot_value(blocks, s, 2),
+                    slot_value(blocks, s, 3), slot_value(blocks, s, 4), slot_value(blocks, s, 5),
+                    slot_value(blocks, s, 6), slot_value(blocks, s, 7), slot_value(blocks, s, 8))
                 r = scene.xform_row[obj[i]]
                 if r >= 0:
                     # normals transform by the inverse transpose; xforms hold the inverse
-                    m = scene.xforms[r]
-                    nx, ny, nz = (m[0] * nx + m[4] * ny + m[8] * nz,
-                                  m[1] * nx + m[5] * ny + m[9] * nz,
-                                  m[2] * nx + m[6] * ny + m[10] * nz)
+                    m = scene.xforms
+                    nx, ny, nz = (m[r, 0] * nx + m[r, 4] * ny + m[r, 8] * nz,
+                                  m[r, 1] * nx + m[r, 5] * ny + m[r, 9] * nz,
+                                  m[r, 2] * nx + m[r, 6] * ny + m[r, 10] * nz)
                     length = np.sqrt(nx * nx + ny * ny + nz * nz)
                     nx, ny, nz = nx / length, ny / length, nz / length
                 normal[i, 0] = nx
                 normal[i, 1] = ny
                 normal[i, 2] = nz
             continue
-        nx, ny, nz, su, sv = analytic_surface(k, scene.params[scene.param_row[obj[i]]], o[0],
-                                              o[1], o[2], d[0], d[1], d[2], t[i], slot[i])
+        nx, ny, nz, su, sv = analytic_surface(k, scene.params[scene.param_row[obj[i]]], ox, oy,
+                                              oz, dx, dy, dz, t[i], slot[i])
         if want_uv:
             uv[i, 0] = su
             uv[i, 1] = sv
@@ -351,4 +369,3 @@ def surface_fields(scene, origins, directions, t, obj, slot, u, v, want_uv, want
             normal[i, 0] = nx
             normal[i, 1] = ny
             normal[i, 2] = nz
-    return uv, normal, point

@@ -222,7 +222,7 @@ def _record(hit_t, hit_obj, hit_prim, found, t, obj, prim):
 
 
 @njit(cache=True, inline="always")
-def _lane(blocks, slot, value):
+def slot_value(blocks, slot, value):
     """Value ``value`` (0..8: a.x, a.y, a.z, b.x, ..., c.z) of the triangle in ``slot``."""
     return blocks[slot // LANES, value * LANES + slot % LANES]
 
@@ -285,9 +285,9 @@ def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj
                     slot = LANES * block + lane
                     t, u, w = triangle_hit(
                         test, ox, oy, oz, dx, dy, dz, kx, ky, kz, sx, sy, sz, tmin, best_t,
-                        _lane(blocks, slot, 0), _lane(blocks, slot, 1), _lane(blocks, slot, 2),
-                        _lane(blocks, slot, 3), _lane(blocks, slot, 4), _lane(blocks, slot, 5),
-                        _lane(blocks, slot, 6), _lane(blocks, slot, 7), _lane(blocks, slot, 8))
+                        slot_value(blocks, slot, 0), slot_value(blocks, slot, 1), slot_value(blocks, slot, 2),
+                        slot_value(blocks, slot, 3), slot_value(blocks, slot, 4), slot_value(blocks, slot, 5),
+                        slot_value(blocks, slot, 6), slot_value(blocks, slot, 7), slot_value(blocks, slot, 8))
                     if t < np.inf:
                         lanes[lane] = t
                         lanes[LANES + lane] = u
@@ -438,9 +438,9 @@ def _share_vertex(blocks, p, q):
     """Whether the triangles in slots p and q share a vertex (exactly equal coordinates)."""
     for a in range(3):
         for b in range(3):
-            if (_lane(blocks, p, 3 * a) == _lane(blocks, q, 3 * b)
-                    and _lane(blocks, p, 3 * a + 1) == _lane(blocks, q, 3 * b + 1)
-                    and _lane(blocks, p, 3 * a + 2) == _lane(blocks, q, 3 * b + 2)):
+            if (slot_value(blocks, p, 3 * a) == slot_value(blocks, q, 3 * b)
+                    and slot_value(blocks, p, 3 * a + 1) == slot_value(blocks, q, 3 * b + 1)
+                    and slot_value(blocks, p, 3 * a + 2) == slot_value(blocks, q, 3 * b + 2)):
                 return True
     return False
 
