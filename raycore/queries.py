@@ -15,7 +15,6 @@ import threading
 import numpy as np
 from numba import get_num_threads, get_thread_id, njit, parallel_chunksize, prange
 
-from raycore._fp import like
 from raycore.bvh.record import arrays_of
 from raycore.bvh.traverse import (
     ALL,

@@ -285,9 +285,11 @@ def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj
                     slot = LANES * block + lane
                     t, u, w = triangle_hit(
                         test, ox, oy, oz, dx, dy, dz, kx, ky, kz, sx, sy, sz, tmin, best_t,
-                        slot_value(blocks, slot, 0), slot_value(blocks, slot, 1), slot_value(blocks, slot, 2),
-                        slot_value(blocks, slot, 3), slot_value(blocks, slot, 4), slot_value(blocks, slot, 5),
-                        slot_value(blocks, slot, 6), slot_value(blocks, slot, 7), slot_value(blocks, slot, 8))
+                        slot_value(blocks, slot, 0), slot_value(blocks, slot, 1),
+                        slot_value(blocks, slot, 2), slot_value(blocks, slot, 3),
+                        slot_value(blocks, slot, 4), slot_value(blocks, slot, 5),
+                        slot_value(blocks, slot, 6), slot_value(blocks, slot, 7),
+                        slot_value(blocks, slot, 8))
                     if t < np.inf:
                         lanes[lane] = t
                         lanes[LANES + lane] = u
