@@ -89,6 +89,19 @@ def _trace_here(record, mode, test, sphere_method, origins, directions, tmin, tm
                        real_scratch[0], capacity)
 
 
+@njit(cache=True)
+def _hits_here(record, mode, test, sphere_method, origins, directions, tmin, tmax, out_t, out_obj,
+               out_prim, out_hit, int_scratch, real_scratch):
+    """:func:`_trace_here` for closest hits without surface fields (CLOSEST) and any hits
+    (ANY): fewer arguments for the dispatcher to check (22 of them cost 1.5 us, 14 cost 0.9)."""
+    no_reals = out_t[:0]
+    no_ints = out_obj[:0]
+    return trace_range(arrays_of(record), mode, test, sphere_method, origins, directions, tmin,
+                       tmax, np.int64(0), len(origins), out_t, out_obj, out_prim, out_hit,
+                       no_reals, no_reals, no_ints, no_ints, no_reals, no_ints, no_ints,
+                       int_scratch[0], real_scratch[0], np.int64(HIT_CAPACITY))
+
+
 class _Scratch(threading.local):
     """Each calling thread's scratch rows, per precision and hit-list capacity."""
 
@@ -138,12 +151,15 @@ def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, o
     out_obj = _NO_INTS if out_obj is None else out_obj
     out_prim = _NO_INTS if out_prim is None else out_prim
     out_hit = _NO_FLAGS if out_hit is None else out_hit
-    u, v, slot = (empty, empty, _NO_INTS) if barycentrics is None else barycentrics
-    hits_t, hits_obj, hits_prim = (empty, _NO_INTS, _NO_INTS) if hits is None else hits
     serial = len(origins) < SERIAL_BELOW
     # get_num_threads costs 0.8 us: asked only for a parallel call
     threads = 1 if serial else get_num_threads()
     int_scratch, real_scratch = _scratch.get(origins.dtype, capacity, threads)
+    if serial and mode <= ANY and barycentrics is None:
+        return _hits_here(scene, mode, test, sphere_method, origins, directions, tmin, tmax,
+                          out_t, out_obj, out_prim, out_hit, int_scratch, real_scratch)
+    u, v, slot = (empty, empty, _NO_INTS) if barycentrics is None else barycentrics
+    hits_t, hits_obj, hits_prim = (empty, _NO_INTS, _NO_INTS) if hits is None else hits
     arguments = (scene, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
                  out_obj, out_prim, out_hit, u, v, slot, offsets, hits_t, hits_obj, hits_prim,
                  int_scratch, real_scratch, capacity)
