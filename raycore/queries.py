@@ -127,7 +127,7 @@ _NO_OFFSETS = np.zeros(1, np.int64)
 
 def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, out_prim=None,
           out_hit=None, barycentrics=None, offsets=_NO_OFFSETS, hits=None,
-          capacity=HIT_CAPACITY):
+          capacity=HIT_CAPACITY, group=True):
     """Run one query over a batch; outputs not given are passed empty.
 
     Parameters
@@ -139,11 +139,14 @@ def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, o
     out_t, out_obj, out_prim, out_hit, barycentrics, offsets, hits
         As :func:`raycore.bvh.traverse.trace_range`'s outputs (``barycentrics`` the
         ``(u, v, slot)`` triple, ``hits`` the ``(t, obj, prim)`` buffers).
+    group : bool
+        Trace a large incoherent batch in a coherent order (:func:`grouping`); False for rays
+        grouped already.
 
     Returns
     -------
     int
-        The first refused ray, or N if none.
+        A refused ray (the first, unless the batch was grouped), or N if none.
     """
     origins, directions, tmin, tmax = rays
     empty = _EMPTY[origins.dtype]
@@ -165,12 +168,43 @@ def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, o
                  int_scratch, real_scratch, capacity)
     if serial:
         return _trace_here(*arguments)
-    if len(origins) >= GROUP_FROM:
-        order = np.empty(len(origins), np.int64)
-        keys = np.empty(len(origins), np.int16)
-        if group_order(origins, directions, PARTS_PER_THREAD * threads, order, keys):
-            return _trace_grouped(order, arguments, threads)
+    grouped = grouping(rays, threads) if group else None
+    if grouped is not None:
+        return _trace_grouped(*grouped, arguments, threads)
     return _trace_in_chunks(arguments, threads)
+
+
+def grouping(rays, threads):
+    """``(order, rays)``: the batch's rays in the order they trace fastest in
+    (:mod:`raycore.ray_order`), and where each comes from; None for a batch that is small or
+    coherent already.
+
+    Parameters
+    ----------
+    rays : tuple
+        ``(origins, directions, tmin, tmax)`` as :func:`raycore.rays.ray_arrays` gives them.
+    threads : int
+
+    Returns
+    -------
+    order : ndarray of int64, shape (N,)
+    rays : tuple
+        Copies of ``rays`` in that order; bounds shared by every ray stay shared.
+    """
+    origins, directions, tmin, tmax = rays
+    n = len(origins)
+    if n < GROUP_FROM:
+        return None
+    # NumPy's arrays, not Numba's: see group_order
+    order = np.empty(n, np.int64)
+    if not group_order(origins, directions, PARTS_PER_THREAD * threads, order,
+                       np.empty(n, np.int16)):
+        return None
+    grouped = (np.empty_like(origins), np.empty_like(directions),
+               np.empty_like(tmin) if len(tmin) == n else tmin,
+               np.empty_like(tmax) if len(tmax) == n else tmax)
+    gather_rays(order, *rays, *grouped)
+    return order, grouped
 
 
 def _trace_in_chunks(arguments, threads):
@@ -182,28 +216,21 @@ def _trace_in_chunks(arguments, threads):
         return _trace_in_parallel(*arguments, size)
 
 
-def _trace_grouped(order, arguments, threads):
-    """Trace the rays in ``order`` (:func:`raycore.ray_order.group_order`): on copies of them,
-    into answers in that order, which are then put back in the batch's order."""
-    (scene, mode, test, method, origins, directions, tmin, tmax, *outputs, offsets, hits_t,
-     hits_obj, hits_prim, int_scratch, real_scratch, capacity) = arguments
-    n = len(order)
-    # NumPy's arrays, not Numba's: see group_order; bounds shared by every ray stay shared
-    rays = (np.empty_like(origins), np.empty_like(directions),
-            np.empty_like(tmin) if len(tmin) == n else tmin,
-            np.empty_like(tmax) if len(tmax) == n else tmax)
-    gather_rays(order, origins, directions, tmin, tmax, *rays)
+#: Where ``trace``'s arguments hold the rays, and the per-ray outputs (out_t .. out_slot).
+_RAYS, _OUTPUTS = slice(4, 8), slice(8, 15)
+
+
+def _trace_grouped(order, rays, arguments, threads):
+    """Trace ``rays``, the batch's in ``order`` (:func:`grouping`), into answers in that
+    order, which are then put back in the batch's order."""
+    outputs = arguments[_OUTPUTS]
     grouped = [np.empty_like(out) for out in outputs]
-    if mode == ALL:
-        # each ray's crossings still go to the ray's own place in the hit buffers
-        offsets = offsets[order]
-    first_bad = _trace_in_chunks((scene, mode, test, method, *rays, *grouped, offsets, hits_t,
-                                  hits_obj, hits_prim, int_scratch, real_scratch, capacity),
-                                 threads)
+    first_bad = _trace_in_chunks((*arguments[:_RAYS.start], *rays, *grouped,
+                                  *arguments[_OUTPUTS.stop:]), threads)
     for out, answer in zip(outputs, grouped, strict=True):
         if len(out):
             ungroup(order, answer, out)
-    return order[first_bad] if first_bad < n else n
+    return order[first_bad] if first_bad < len(order) else len(order)
 
 
 def closest_hits(scene, rays, test, sphere_method, barycentrics):
@@ -241,17 +268,17 @@ def any_hits(scene, rays, test, sphere_method):
     return first_bad, hit.view(np.bool_)
 
 
-def crossing_counts(scene, rays, test, sphere_method, mode=COUNT, out_hit=None):
+def crossing_counts(scene, rays, test, sphere_method, mode=COUNT, out_hit=None, group=True):
     """First refused ray (or N), the (N,) int64 crossings of each ray (a shared edge or vertex
     crossed once counts once), and the hit-list capacity that held every ray's crossings.
 
     With ``mode`` PARITY, ``out_hit`` ((N,) uint8) also receives whether each ray crosses some
-    closed object an odd number of times."""
+    closed object an odd number of times.  ``group`` as :func:`trace`'s."""
     counts = np.empty(len(rays[0]), np.int64)
     capacity = HIT_CAPACITY
     while True:
         first_bad = trace(scene, mode, rays, test, sphere_method, out_obj=counts,
-                          out_hit=out_hit, capacity=capacity)
+                          out_hit=out_hit, capacity=capacity, group=group)
         most = -int(counts.min()) if len(counts) else 0
         if first_bad < len(counts) or most <= capacity:
             return first_bad, counts, capacity
@@ -279,17 +306,27 @@ def all_hits(scene, rays, test, sphere_method):
         Crossings of ray i are at ``[offsets[i], offsets[i + 1])`` with offsets the cumulative
         counts; ``prim`` as in :func:`closest_hits`.
     """
-    # the first pass counts, the second fills exactly-sized buffers
-    first_bad, counts, capacity = crossing_counts(scene, rays, test, sphere_method)
-    offsets = np.zeros(len(counts) + 1, np.int64)
-    if first_bad < len(counts):
+    # the first pass counts, the second fills exactly-sized buffers; a batch is grouped once
+    # for both (grouping is a tenth of a pass)
+    n = len(rays[0])
+    grouped = grouping(rays, get_num_threads()) if n >= SERIAL_BELOW else None
+    order, traced = (np.arange(0), rays) if grouped is None else grouped
+    first_bad, counts, capacity = crossing_counts(scene, traced, test, sphere_method,
+                                                  group=False)
+    if len(order):
+        first_bad = order[first_bad] if first_bad < n else n
+        ungroup(order, counts.copy(), counts)
+    offsets = np.zeros(n + 1, np.int64)
+    if first_bad < n:
         return first_bad, counts, None, None, None
     np.cumsum(counts, out=offsets[1:])
     total = int(offsets[-1])
     hits = (np.empty(total, rays[0].dtype), np.empty(total, np.int64), np.empty(total, np.int64))
     if total:
-        trace(scene, ALL, rays, test, sphere_method, out_obj=np.empty_like(counts),
-              offsets=offsets, hits=hits, capacity=capacity)
+        # each ray's crossings go to its place in the batch's order
+        trace(scene, ALL, traced, test, sphere_method, out_obj=np.empty_like(counts),
+              offsets=offsets[order] if len(order) else offsets, hits=hits,
+              capacity=capacity, group=False)
     return first_bad, counts, *hits
 
 

@@ -20,16 +20,18 @@ SEED = 0
 
 
 def _grouped_batches(monkeypatch):
-    """Count the batches that take the grouped path."""
-    calls = []
-    trace_grouped = queries._trace_grouped
+    """The sizes of the batches that are grouped, as they are."""
+    sizes = []
+    grouping = queries.grouping
 
-    def counted(*args):
-        calls.append(len(args[0]))
-        return trace_grouped(*args)
+    def counted(rays, threads):
+        grouped = grouping(rays, threads)
+        if grouped is not None:
+            sizes.append(len(grouped[0]))
+        return grouped
 
-    monkeypatch.setattr(queries, "_trace_grouped", counted)
-    return calls
+    monkeypatch.setattr(queries, "grouping", counted)
+    return sizes
 
 
 def _large_shuffled(dtype):
@@ -64,12 +66,12 @@ def test_every_query_answers_each_ray_as_in_a_small_batch(dtype, monkeypatch):
         expected = np.concatenate([getattr(every_alone, name)[start:start + count]
                                    for start, count in zip(starts, every.counts, strict=True)])
         assert np.array_equal(getattr(every, name), expected), name
-    # intersect, occluded, count, and intersect_all's two passes
-    assert grouped == [len(source)] * 5
+    # intersect, occluded, count, and intersect_all once for its two passes
+    assert grouped == [len(source)] * 4
     # scalar bounds are shared by every ray and stay so
     plain = scene.intersect(large[0], large[1])
     assert np.array_equal(plain.t, scene.intersect(small[0], small[1]).t[source])
-    assert len(grouped) == 6
+    assert len(grouped) == 5
 
 
 def test_contains_is_unchanged_by_grouping(monkeypatch):
