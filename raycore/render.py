@@ -288,7 +288,7 @@ def _light_and_shadow(scene, origins, directions, hits, shading_normal, light, t
     return cosine, shadowed
 
 
-@njit(cache=True, parallel=True, error_model="numpy")
+@njit(cache=True, parallel=True, error_model="numpy", _nrt=False)
 def _shadow_rays(origins, directions, t, normals, shading, light, error_eps, near,
                  float_scale, int_scale, cosine, shadow_origins, shadow_directions, shadow_tmax):
     """Per camera ray, in one pass: the cosine of its hit's shading normal (turned to the
@@ -299,28 +299,59 @@ def _shadow_rays(origins, directions, t, normals, shading, light, error_eps, nea
     epsilons of ``|origin| + |t * direction|``), then as :func:`raycore.offset_ray_origin` does.
     Its tmax is inf where the light reaches the front of the surface, and -1 where it does not
     and for misses: an empty interval, so that those rays cost nothing and nothing is gathered.
+
+    Each ray's inputs and the light are read once into scalars: the compiler cannot tell that
+    the outputs do not overlap them, and reloaded them after every store.
     """
+    light_x, light_y, light_z = light[0], light[1], light[2]
     for i in prange(len(t)):
-        distance = t[i]  # read once, as in _shade_lambert
-        side, lit, reach = like(distance, 1.0), 0.0, 0.0
-        if distance < np.inf:
-            side = _facing_side(normals, directions, i)
+        distance = t[i]  # read once, as in _lambert_image
+        shadow_directions[i, 0] = light_x
+        shadow_directions[i, 1] = light_y
+        shadow_directions[i, 2] = light_z
+        if not distance < np.inf:  # a miss
+            cosine[i] = 0.0
+            shadow_tmax[i] = -1.0
             for k in range(3):
-                normal = side * normals[i, k]
-                lit += side * shading[i, k] * light[k]
-                reach += abs(normal) * error_eps * (abs(origins[i, k])
-                                                    + abs(distance * directions[i, k]))
-        cosine[i] = lit
-        shadow_tmax[i] = np.inf if lit > 0 else -1.0
-        for k in range(3):
-            shadow_directions[i, k] = light[k]
-            if lit > 0:
-                normal = side * normals[i, k]
-                point = origins[i, k] + distance * directions[i, k]
-                shadow_origins[i, k] = offset_coordinate(like(near, point + reach * normal),
-                                                         normal, near, float_scale, int_scale)
-            else:
                 shadow_origins[i, k] = 0.0
+            continue
+        side = _facing_side(normals, directions, i)
+        lit = 0.0
+        lit += side * shading[i, 0] * light_x
+        lit += side * shading[i, 1] * light_y
+        lit += side * shading[i, 2] * light_z
+        cosine[i] = lit
+        if not lit > 0:
+            shadow_tmax[i] = -1.0
+            for k in range(3):
+                shadow_origins[i, k] = 0.0
+            continue
+        shadow_tmax[i] = np.inf
+        normal_x = side * normals[i, 0]
+        normal_y = side * normals[i, 1]
+        normal_z = side * normals[i, 2]
+        origin_x, origin_y, origin_z = origins[i, 0], origins[i, 1], origins[i, 2]
+        along_x = distance * directions[i, 0]
+        along_y = distance * directions[i, 1]
+        along_z = distance * directions[i, 2]
+        reach = 0.0
+        reach += abs(normal_x) * error_eps * (abs(origin_x) + abs(along_x))
+        reach += abs(normal_y) * error_eps * (abs(origin_y) + abs(along_y))
+        reach += abs(normal_z) * error_eps * (abs(origin_z) + abs(along_z))
+        shadow_origins[i, 0] = _shadow_origin(origin_x + along_x, reach, normal_x, near,
+                                              float_scale, int_scale)
+        shadow_origins[i, 1] = _shadow_origin(origin_y + along_y, reach, normal_y, near,
+                                              float_scale, int_scale)
+        shadow_origins[i, 2] = _shadow_origin(origin_z + along_z, reach, normal_z, near,
+                                              float_scale, int_scale)
+
+
+@njit(inline="always")
+def _shadow_origin(point, reach, normal, near, float_scale, int_scale):
+    """A coordinate of a shadow ray's origin: the hit point's, moved ``reach`` along the
+    normal's coordinate, then off the surface by :func:`raycore.offset.offset_coordinate`."""
+    return offset_coordinate(like(near, point + reach * normal), normal, near, float_scale,
+                             int_scale)
 
 
 @njit(cache=True, parallel=True, _nrt=False)
