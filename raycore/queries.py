@@ -308,6 +308,13 @@ def surface_fields(record, origins, directions, t, obj, slot, u, v, want_uv, wan
     return uv, normal, point
 
 
+#: :func:`raycore.primitives.analytic.analytic_surface` inlined into :func:`_surface_fields`: a
+#: call per analytic hit, its parameter row passed as an array, made the demo render's fields
+#: (836K plane hits of 1M rays) 7.6 ms, inlined 4.3 ms.  Not cached on its own: it is compiled
+#: into _surface_fields, which is.
+_analytic_surface_inline = njit(error_model="numpy", forceinline=True)(analytic_surface.py_func)
+
+
 @njit(cache=True)
 def _fill_surface_fields(record, origins, directions, t, obj, slot, u, v, uv, normal, point):
     _surface_fields(arrays_of(record), origins, directions, t, obj, slot, u, v, uv, normal, point)
@@ -359,8 +366,8 @@ def _surface_fields(scene, origins, directions, t, obj, slot, u, v, uv, normal, 
                 normal[i, 1] = ny
                 normal[i, 2] = nz
             continue
-        nx, ny, nz, su, sv = analytic_surface(k, scene.params[scene.param_row[obj[i]]], ox, oy,
-                                              oz, dx, dy, dz, t[i], slot[i])
+        nx, ny, nz, su, sv = _analytic_surface_inline(
+            k, scene.params[scene.param_row[obj[i]]], ox, oy, oz, dx, dy, dz, t[i], slot[i])
         if want_uv:
             uv[i, 0] = su
             uv[i, 1] = sv
