@@ -9,6 +9,7 @@ the view, image y grows downwards.
 import numpy as np
 from numba import njit, prange
 
+from raycore._memory import empty_aligned
 from raycore.rays import as_float_array, resolve_dtype
 
 
@@ -132,8 +133,8 @@ def _camera_rays(center, right, up, x_scale, y_scale, width, height, constant, d
     rows, columns, _ = strata(samples)
     if samples == 1:  # pixel centres, not jittered
         return _plane_rays(center, right, up, x * x_scale, y * y_scale, constant, dtype, unit)
-    points = np.empty((width * height * samples, 3), dtype)
-    constants = np.empty_like(points)
+    points = empty_aligned((width * height * samples, 3), dtype)
+    constants = empty_aligned(points.shape, dtype)
     _sample_rays_kernel(center, right, up, float(x_scale), float(y_scale), width, height,
                         samples, rows, columns, np.uint64(seed), unit, constant, points,
                         constants)
@@ -144,8 +145,8 @@ def _plane_rays(center, right, up, across, rise, constant, dtype, unit=False):
     """Rays of an image plane, in scanline order, both (H*W, 3) of ``dtype``: the points
     ``center + across[w] * right + rise[h] * up`` (computed in float64, rounded once, scaled to
     unit length when ``unit``), and rows that all equal ``constant``, written in the same pass."""
-    points = np.empty((len(rise) * len(across), 3), dtype)
-    constants = np.empty_like(points)
+    points = empty_aligned((len(rise) * len(across), 3), dtype)
+    constants = empty_aligned(points.shape, dtype)
     _plane_rays_kernel(center, right, up, across, rise, unit, constant, points, constants)
     return points, constants
 

@@ -15,6 +15,7 @@ import threading
 import numpy as np
 from numba import get_num_threads, get_thread_id, njit, parallel_chunksize, prange
 
+from raycore._memory import empty_aligned
 from raycore.bvh.record import arrays_of
 from raycore.bvh.traverse import (
     ALL,
@@ -301,9 +302,9 @@ def surface_fields(record, origins, directions, t, obj, slot, u, v, want_uv, wan
     n = len(t)
     # NumPy's arrays (huge pages; see raycore.ray_order.group_order), filled without reference
     # counts: a view per ray (a parameter row, a leaf block) made the pass 10x slower with them
-    uv = np.empty((n if want_uv else 0, 2), t.dtype)
-    normal = np.empty((n if want_normal else 0, 3), t.dtype)
-    point = np.empty((n if want_point else 0, 3), t.dtype)
+    uv = empty_aligned((n if want_uv else 0, 2), t.dtype)
+    normal = empty_aligned((n if want_normal else 0, 3), t.dtype)
+    point = empty_aligned((n if want_point else 0, 3), t.dtype)
     _fill_surface_fields(record, origins, directions, t, obj, slot, u, v, uv, normal, point)
     return uv, normal, point
 

@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit, prange, vectorize
 
 from raycore._fp import like
+from raycore._memory import empty_aligned
 from raycore.camera import strata
 from raycore.offset import offset_constants, offset_coordinate
 
@@ -286,10 +287,10 @@ def _light_and_shadow(scene, origins, directions, hits, shading_normal, light, t
     """(N,) float64 cosines of the hits' shading normals to the light (see
     :func:`_shadow_rays`), and (N,) bool: whether a shadow ray found something towards it."""
     rays = len(origins)
-    cosine = np.empty(rays)
-    shadow_origins = np.empty((rays, 3), scene.dtype)
-    shadow_directions = np.empty_like(shadow_origins)
-    shadow_tmax = np.empty(rays, scene.dtype)
+    cosine = empty_aligned((rays,), np.float64)
+    shadow_origins = empty_aligned((rays, 3), scene.dtype)
+    shadow_directions = empty_aligned((rays, 3), scene.dtype)
+    shadow_tmax = empty_aligned((rays,), scene.dtype)
     error_eps = _POINT_ERROR_EPS * float(np.finfo(scene.dtype).eps)
     _shadow_rays(origins, directions, hits.t, hits.normal, shading_normal, light, error_eps,
                  *offset_constants(scene.dtype), cosine, shadow_origins, shadow_directions,
