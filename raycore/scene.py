@@ -320,17 +320,17 @@ class Scene:
         if not fields:
             return Hits(t, obj, prim)
         u, v, slot = surface
-        smooth = "shading_normal" in fields  # interpolated with uv, normal where not a mesh
+        smooth = "shading_normal" in fields  # interpolated with u, v; normal where not a mesh
         uv, normal, point = queries.surface_fields(
-            self._record, rays[0], rays[1], t, obj, slot, u, v, smooth or "uv" in fields,
+            self._record, rays[0], rays[1], t, obj, slot, u, v, "uv" in fields,
             smooth or "normal" in fields, "point" in fields)
         surface = {"uv": uv, "normal": normal, "point": point}
         if smooth:
-            surface["shading_normal"] = self._shading_normals(obj, prim, uv, normal)
+            surface["shading_normal"] = self._shading_normals(obj, prim, u, v, normal)
         return Hits(t=t, geom_id=obj, prim_id=prim,
                     **{name: surface[name] for name in fields})
 
-    def _shading_normals(self, geom_id, prim_id, uv, normal):
+    def _shading_normals(self, geom_id, prim_id, u, v, normal):
         """:func:`raycore.shading.shading_normals` of hits, with the meshes' vertex normals
         made once per built scene."""
         record = self._record
@@ -338,7 +338,7 @@ class Scene:
             self._normal_tables = (record, NormalTables(
                 self._meshes, self._kind, self._mesh_of, self._xform_row, self._xforms,
                 self.dtype))
-        return shading_normals(self._normal_tables[1], geom_id, prim_id, uv, normal)
+        return shading_normals(self._normal_tables[1], geom_id, prim_id, u, v, normal)
 
     def occluded(self, origins, directions, tmin=0.0, tmax=np.inf, *,
                  triangle_test="watertight", sphere_method="precise"):

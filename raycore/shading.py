@@ -44,8 +44,8 @@ def vertex_normals(vertices, faces):
     return normals
 
 
-@njit(cache=True, parallel=True)
-def _interpolate(geom_id, prim_id, uv, normal, kind, mesh_of, xform_row, xforms, face_base,
+@njit(cache=True, parallel=True, _nrt=False)
+def _interpolate(geom_id, prim_id, u, v, normal, kind, mesh_of, xform_row, xforms, face_base,
                  faces, normals, out):
     for i in prange(len(geom_id)):
         g = geom_id[i]
@@ -54,12 +54,12 @@ def _interpolate(geom_id, prim_id, uv, normal, kind, mesh_of, xform_row, xforms,
                 out[i, k] = normal[i, k]
             continue
         f = face_base[mesh_of[g]] + prim_id[i]
-        u, v = uv[i, 0], uv[i, 1]
-        w = 1.0 - u - v
+        wb, wc = u[i], v[i]
+        wa = 1.0 - wb - wc
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-        nx = w * normals[a, 0] + u * normals[b, 0] + v * normals[c, 0]
-        ny = w * normals[a, 1] + u * normals[b, 1] + v * normals[c, 1]
-        nz = w * normals[a, 2] + u * normals[b, 2] + v * normals[c, 2]
+        nx = wa * normals[a, 0] + wb * normals[b, 0] + wc * normals[c, 0]
+        ny = wa * normals[a, 1] + wb * normals[b, 1] + wc * normals[c, 1]
+        nz = wa * normals[a, 2] + wb * normals[b, 2] + wc * normals[c, 2]
         r = xform_row[g]
         if r >= 0:
             # normals transform by the inverse transpose; xforms hold the inverse (3x4 rows)
@@ -106,7 +106,7 @@ class NormalTables:
                                       or [np.zeros((0, 3))]).astype(dtype)
 
 
-def shading_normals(tables, geom_id, prim_id, uv, normal):
+def shading_normals(tables, geom_id, prim_id, u, v, normal):
     """Unit shading normals of closest hits.
 
     Parameters
@@ -114,8 +114,9 @@ def shading_normals(tables, geom_id, prim_id, uv, normal):
     tables : NormalTables
         The scene's.
     geom_id, prim_id : ndarray of int64, shape (N,)
-    uv : ndarray, shape (N, 2)
-        Barycentrics of mesh hits (hit point ``(1-u-v) a + u b + v c``).
+    u, v : ndarray, shape (N,)
+        Barycentrics of mesh hits (hit point ``(1-u-v) a + u b + v c``), as the trace gives
+        them: read only at mesh hits, so no (N, 2) ``uv`` field is made for them.
     normal : ndarray, shape (N, 3)
         Geometric normals: the answer for analytic shapes and misses (NaN).
 
@@ -125,6 +126,6 @@ def shading_normals(tables, geom_id, prim_id, uv, normal):
         Facing as the geometric normal does (vertex normals follow the faces' winding).
     """
     out = empty_aligned(normal.shape, normal.dtype)
-    _interpolate(geom_id, prim_id, uv, normal, tables.kind, tables.mesh_of, tables.xform_row,
+    _interpolate(geom_id, prim_id, u, v, normal, tables.kind, tables.mesh_of, tables.xform_row,
                  tables.xforms, tables.face_base, tables.faces, tables.normals, out)
     return out

@@ -238,6 +238,9 @@ def test_shading_normal_interpolates_vertex_normals():
     np.testing.assert_allclose(hits.shading_normal[on_mesh], expected, atol=1e-12)
     # not the face normals: smooth
     assert np.abs(hits.shading_normal[on_mesh] - hits.normal[on_mesh]).max() > 0.05
+    # the same asked alone (no uv field made)
+    alone = scene.intersect(*rays, fields=("shading_normal",))
+    np.testing.assert_array_equal(alone.shading_normal, hits.shading_normal)
     elsewhere = ~on_mesh
     np.testing.assert_array_equal(hits.shading_normal[elsewhere], hits.normal[elsewhere])
 
