@@ -103,6 +103,33 @@ def _hits_here(record, mode, test, sphere_method, origins, directions, tmin, tma
                        int_scratch[0], real_scratch[0], np.int64(HIT_CAPACITY))
 
 
+def _call(entry, record, *arguments):
+    """``entry(record, *arguments)`` through its compiled code, without Numba's dispatch.
+
+    Numba's dispatcher types every argument on every call to find the compiled version: 0.7 of
+    the 1.6 us that a one-ray query spent in its compiled entry.  Here every argument but the
+    record has one type per precision (rays and bounds as :func:`raycore.rays.ray_arrays`
+    gives them, C-contiguous, aligned and writable; outputs and scratch made in this module;
+    integers), so the record's type, which also varies with what a scene holds (read-only
+    arrays of a memory-mapped file), names the version.  Its first call goes through the
+    dispatcher, which compiles or loads it; later ones call its entry point (the compiled
+    wrapper the dispatcher itself would call), or the dispatcher where Numba has none.
+    """
+    key = (entry, id(record._type))
+    compiled = _compiled.get(key)
+    if compiled is not None:
+        return compiled[1](record, *arguments)
+    answer = entry(record, *arguments)
+    signature = tuple(map(entry.typeof_pyval, (record, *arguments)))
+    # the type is kept with its entry, so that its id is not reused while cached
+    _compiled[key] = (record._type,
+                      getattr(entry.overloads.get(signature), "entry_point", entry))
+    return answer
+
+
+_compiled = {}
+
+
 class _Scratch(threading.local):
     """Each calling thread's scratch rows, per precision and hit-list capacity."""
 
@@ -160,15 +187,15 @@ def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, o
     threads = 1 if serial else get_num_threads()
     int_scratch, real_scratch = _scratch.get(origins.dtype, capacity, threads)
     if serial and mode <= ANY and barycentrics is None:
-        return _hits_here(scene, mode, test, sphere_method, origins, directions, tmin, tmax,
-                          out_t, out_obj, out_prim, out_hit, int_scratch, real_scratch)
+        return _call(_hits_here, scene, mode, test, sphere_method, origins, directions, tmin,
+                     tmax, out_t, out_obj, out_prim, out_hit, int_scratch, real_scratch)
     u, v, slot = (empty, empty, _NO_INTS) if barycentrics is None else barycentrics
     hits_t, hits_obj, hits_prim = (empty, _NO_INTS, _NO_INTS) if hits is None else hits
     arguments = (scene, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
                  out_obj, out_prim, out_hit, u, v, slot, offsets, hits_t, hits_obj, hits_prim,
                  int_scratch, real_scratch, capacity)
     if serial:
-        return _trace_here(*arguments)
+        return _call(_trace_here, *arguments)
     grouped = grouping(rays, threads) if group else None
     if grouped is not None:
         return _trace_grouped(*grouped, arguments, threads)
@@ -214,7 +241,7 @@ def _trace_in_chunks(arguments, threads):
     # cheaper than a hit), and static halves would leave one core idle
     size = min(CHUNK, max(MIN_CHUNK, len(arguments[4]) // (ITEMS_PER_THREAD * threads)))
     with parallel_chunksize(1):
-        return _trace_in_parallel(*arguments, size)
+        return _call(_trace_in_parallel, *arguments, size)
 
 
 #: Where ``trace``'s arguments hold the rays, and the per-ray outputs (out_t .. out_slot).

@@ -76,11 +76,13 @@ def read_only(array):
 
 
 def _kernel_array(array, dtype):
-    """:func:`_converted`, copied too when read-only: the trace kernels take writable arrays
-    only, since Numba compiles a kernel again for each argument that is read-only (a float32
-    warm-up compiled the traversal six times, not three, for read-only rays and bounds)."""
+    """:func:`_converted`, copied too when read-only or misaligned: the trace kernels take
+    writable, aligned arrays only, since Numba compiles a kernel again for each argument that is
+    read-only (a float32 warm-up compiled the traversal six times, not three, for read-only rays
+    and bounds), and the queries call the compiled version for that one layout directly
+    (:func:`raycore.queries._call`)."""
     array = _converted(array, dtype)
-    return array if array.flags.writeable else array.copy()
+    return array if array.flags.writeable and array.flags.aligned else array.copy()
 
 
 def as_float_array(value, name, dtype, shape=None):
@@ -191,9 +193,9 @@ def ray_arrays(origins, directions, tmin, tmax, dtype):
     """The arrays a query's compiled pass takes, with only the checks NumPy makes cheaply.
 
     ``dtype`` is a ``numpy.dtype`` (float32 or float64).
-    Writable arrays already C-contiguous in ``dtype`` are used as they are (read-only ones are
-    copied: see :func:`_kernel_array`); bounds become (1,) arrays when scalar (shared: kernels
-    never write them).  What is wrong inside the arrays (NaN, inf, zero directions, NaN bounds)
+    Arrays already C-contiguous, aligned and writable in ``dtype`` are used as they are (others
+    are converted or copied: see :func:`_kernel_array`), so that every array returned has that
+    one layout; bounds become (1,) arrays when scalar (shared: kernels never write them).  What is wrong inside the arrays (NaN, inf, zero directions, NaN bounds)
     is found by the compiled pass, which reports the first refused ray; :func:`refuse` then says
     what is wrong with it.
 
@@ -207,18 +209,24 @@ def ray_arrays(origins, directions, tmin, tmax, dtype):
     ValueError
         Naming the argument whose shape or dtype is wrong.
     """
-    if not (_ready(origins, dtype) and _ready(directions, dtype)
-            and origins.shape == directions.shape):
+    if not _ready(origins, directions, dtype):
         origins, directions, _ = _contiguous_rays(origins, directions, dtype)
     count = len(origins)
     return (origins, directions, _as_bound(tmin, "tmin", count, dtype),
             _as_bound(tmax, "tmax", count, dtype))
 
 
-def _ready(array, dtype):
-    # an (N, 3) C-contiguous, writable array of dtype, taken as it is
-    return (type(array) is np.ndarray and array.dtype is dtype and array.ndim == 2
-            and array.shape[1] == 3 and array.flags.c_contiguous and array.flags.writeable)
+def _ready(origins, directions, dtype):
+    # (N, 3) arrays of dtype, of one shape, C-contiguous, aligned and writable: taken as they are
+    if type(origins) is not np.ndarray or type(directions) is not np.ndarray:
+        return False
+    shape = origins.shape
+    if origins.dtype is not dtype or directions.dtype is not dtype or len(shape) != 2 \
+            or shape[1] != 3 or directions.shape != shape:
+        return False
+    given, other = origins.flags, directions.flags
+    return (given.c_contiguous and given.writeable and given.aligned
+            and other.c_contiguous and other.writeable and other.aligned)
 
 
 def refuse(origins, directions, tmin, tmax, dtype):

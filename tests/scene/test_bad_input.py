@@ -74,6 +74,48 @@ def test_strided_rays_answer_and_fail_like_contiguous_ones(dtype, problem):
     assert str(raised.value) == str(expected.value)
 
 
+def _unaligned(array):
+    """A copy of ``array`` one byte past an aligned address: NumPy allows it, and Numba types
+    it apart from aligned arrays."""
+    buffer = np.zeros(array.nbytes + 1, np.uint8)
+    copy = np.frombuffer(buffer.data, array.dtype, array.size, offset=1).reshape(array.shape)
+    copy[...] = array
+    return copy
+
+
+LAYOUTS = {
+    "list": lambda a: a.tolist(),
+    "long-double": lambda a: a.astype(np.longdouble),  # the same values, converted back
+    "read-only": lambda a: np.lib.stride_tricks.as_strided(a, writeable=False),
+    "fortran": np.asfortranarray,
+    "reversed": lambda a: a[::-1].copy()[::-1],
+    "unaligned": _unaligned,
+    "big-endian": lambda a: a.astype(a.dtype.newbyteorder(">")),
+}
+
+
+@pytest.mark.parametrize("count", [1, 700])  # on the calling thread, and in parallel
+@pytest.mark.parametrize("layout", LAYOUTS)
+def test_rays_in_any_layout_answer_like_contiguous_ones(dtype, layout, count):
+    # every query calls one compiled version per precision, without Numba's dispatch, so the
+    # rays must reach it in that one layout whatever the caller hands over
+    rng = np.random.default_rng(5)
+    origins = rng.normal(size=(count, 3)).astype(dtype)
+    directions = (np.array([0.0, 0.0, 3.0]) - origins).astype(dtype)
+    tmax = rng.uniform(2.0, 9.0, count).astype(dtype)
+    scene = small_scene(dtype)
+    assert np.any(scene.occluded(origins, directions, 0.0, tmax))
+    change = LAYOUTS[layout]
+    for query in QUERIES:
+        want = getattr(scene, query)(origins, directions, 0.0, tmax)
+        got = getattr(scene, query)(change(origins), change(directions), 0.0, change(tmax))
+        if query == "intersect":
+            want, got = (want.t, want.geom_id, want.prim_id), (got.t, got.geom_id, got.prim_id)
+        elif query == "intersect_all":
+            want, got = (want.t, want.ray_index), (got.t, got.ray_index)
+        np.testing.assert_array_equal(got, want, err_msg=query)
+
+
 @pytest.mark.parametrize("fields", [("colour",), ("uv", "depth"), "normals", (1,)])
 def test_unknown_fields_raise(dtype, fields):
     with pytest.raises(ValueError, match="fields"):
