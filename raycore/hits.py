@@ -18,7 +18,7 @@ def check_fields(fields):
     return fields
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Hits:
     """Closest hit of each ray.
 
@@ -49,6 +49,13 @@ class Hits:
     normal: np.ndarray | None = None
     point: np.ndarray | None = None
     shading_normal: np.ndarray | None = None
+
+    def __init__(self, t, geom_id, prim_id, uv=None, normal=None, point=None,
+                 shading_normal=None):
+        # one update of the instance's dict: a frozen dataclass's own __init__ makes a call to
+        # object.__setattr__ per field, 0.8 us of a one-ray intersect (this takes 0.3)
+        self.__dict__.update(t=t, geom_id=geom_id, prim_id=prim_id, uv=uv, normal=normal,
+                             point=point, shading_normal=shading_normal)
 
     @property
     def hit(self):
