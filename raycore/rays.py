@@ -195,9 +195,9 @@ def ray_arrays(origins, directions, tmin, tmax, dtype):
     ``dtype`` is a ``numpy.dtype`` (float32 or float64).
     Arrays already C-contiguous, aligned and writable in ``dtype`` are used as they are (others
     are converted or copied: see :func:`_kernel_array`), so that every array returned has that
-    one layout; bounds become (1,) arrays when scalar (shared: kernels never write them).  What is wrong inside the arrays (NaN, inf, zero directions, NaN bounds)
-    is found by the compiled pass, which reports the first refused ray; :func:`refuse` then says
-    what is wrong with it.
+    one layout; bounds become (1,) arrays when scalar (shared: kernels never write them).  What
+    is wrong inside the arrays (NaN, inf, zero directions, NaN bounds) is found by the compiled
+    pass, which reports the first refused ray; :func:`refuse` then says what is wrong with it.
 
     Returns
     -------
