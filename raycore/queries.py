@@ -23,6 +23,7 @@ from raycore.bvh.traverse import (
     CLOSEST,
     COUNT,
     HIT_CAPACITY,
+    LIST,
     MESH,
     PARITY,
     new_scratch,
@@ -45,6 +46,11 @@ ITEMS_PER_THREAD = 2
 #: work items cut down to MIN_CHUNK rays: 256 rays took 34-35 us on one thread and 31-37 on two;
 #: 512 rays 64-65 and 49-52 us; 1024 rays 125-127 and 79-94 us (142 as one item of CHUNK rays).
 SERIAL_BELOW = 512
+
+#: Crossings a ray may list in :func:`all_hits`'s pass, on average over a work item: rays that
+#: cross more surfaces use the room of rays that cross fewer, and those that find none left are
+#: traced again.  Random rays inside a closed mesh cross it 0.7 times on average.
+LIST_ROOM = 2
 
 #: Batches from this size on are traced in a coherent order when they are incoherent
 #: (:mod:`raycore.ray_order`), in pieces of PARTS_PER_THREAD per thread.
@@ -296,17 +302,21 @@ def any_hits(scene, rays, test, sphere_method):
     return first_bad, hit.view(np.bool_)
 
 
-def crossing_counts(scene, rays, test, sphere_method, mode=COUNT, out_hit=None, group=True):
+def crossing_counts(scene, rays, test, sphere_method, mode=COUNT, out_hit=None, group=True,
+                    offsets=_NO_OFFSETS, hits=None):
     """First refused ray (or N), the (N,) int64 crossings of each ray (a shared edge or vertex
     crossed once counts once), and the hit-list capacity that held every ray's crossings.
 
     With ``mode`` PARITY, ``out_hit`` ((N,) uint8) also receives whether each ray crosses some
-    closed object an odd number of times.  ``group`` as :func:`trace`'s."""
+    closed object an odd number of times; with LIST, ``offsets`` and ``hits`` receive the
+    crossings that fit (:func:`raycore.bvh.traverse.trace_range`).  ``group`` as
+    :func:`trace`'s."""
     counts = np.empty(len(rays[0]), np.int64)
     capacity = HIT_CAPACITY
     while True:
         first_bad = trace(scene, mode, rays, test, sphere_method, out_obj=counts,
-                          out_hit=out_hit, capacity=capacity, group=group)
+                          out_hit=out_hit, offsets=offsets, hits=hits, capacity=capacity,
+                          group=group)
         most = -int(counts.min()) if len(counts) else 0
         if first_bad < len(counts) or most <= capacity:
             return first_bad, counts, capacity
@@ -334,28 +344,62 @@ def all_hits(scene, rays, test, sphere_method):
         Crossings of ray i are at ``[offsets[i], offsets[i + 1])`` with offsets the cumulative
         counts; ``prim`` as in :func:`closest_hits`.
     """
-    # the first pass counts, the second fills exactly-sized buffers; a batch is grouped once
-    # for both (grouping is a tenth of a pass)
+    # One pass counts the crossings and lists them in LIST_ROOM places a ray; they are then
+    # moved to exactly-sized arrays, and only rays that found no room are traced again (a
+    # count pass and a fill pass traced every ray twice).  A batch is grouped once.
     n = len(rays[0])
     grouped = grouping(rays, get_num_threads()) if n >= SERIAL_BELOW else None
     order, traced = (np.arange(0), rays) if grouped is None else grouped
-    first_bad, counts, capacity = crossing_counts(scene, traced, test, sphere_method,
-                                                  group=False)
+    listed_at = np.empty(n, np.int64)
+    listed = (np.empty(LIST_ROOM * n, rays[0].dtype), np.empty(LIST_ROOM * n, np.int64),
+              np.empty(LIST_ROOM * n, np.int64))
+    first_bad, traced_counts, capacity = crossing_counts(
+        scene, traced, test, sphere_method, LIST, group=False, offsets=listed_at, hits=listed)
+    counts = traced_counts
     if len(order):
         first_bad = order[first_bad] if first_bad < n else n
-        ungroup(order, counts.copy(), counts)
-    offsets = np.zeros(n + 1, np.int64)
+        counts = np.empty_like(traced_counts)
+        ungroup(order, traced_counts, counts)
     if first_bad < n:
         return first_bad, counts, None, None, None
+    offsets = np.zeros(n + 1, np.int64)
     np.cumsum(counts, out=offsets[1:])
+    # where each traced ray's crossings go in the batch's order
+    places = offsets[order] if len(order) else offsets[:-1]
     total = int(offsets[-1])
     hits = (np.empty(total, rays[0].dtype), np.empty(total, np.int64), np.empty(total, np.int64))
-    if total:
-        # each ray's crossings go to its place in the batch's order
-        trace(scene, ALL, traced, test, sphere_method, out_obj=np.empty_like(counts),
-              offsets=offsets[order] if len(order) else offsets, hits=hits,
+    _move_lists(listed_at, traced_counts, places, *listed, *hits)
+    again = np.flatnonzero(listed_at < 0)
+    if len(again):
+        trace(scene, ALL, _rays_at(traced, again), test, sphere_method,
+              out_obj=np.empty(len(again), np.int64), offsets=places[again], hits=hits,
               capacity=capacity, group=False)
     return first_bad, counts, *hits
+
+
+@njit(cache=True)
+def _move_lists(listed_at, counts, places, listed_t, listed_obj, listed_prim, hits_t, hits_obj,
+                hits_prim):
+    """Copy each ray's crossings from where :func:`all_hits`'s pass listed them
+    (``listed_at``; -1 where they did not fit) to their places in the answer."""
+    for i in range(len(counts)):
+        at = listed_at[i]
+        if at < 0:
+            continue
+        to = places[i]
+        for j in range(counts[i]):
+            hits_t[to + j] = listed_t[at + j]
+            hits_obj[to + j] = listed_obj[at + j]
+            hits_prim[to + j] = listed_prim[at + j]
+
+
+def _rays_at(rays, index):
+    """The rays ``index`` of ``rays`` (ray_arrays's tuple); bounds shared by every ray stay
+    shared."""
+    origins, directions, tmin, tmax = rays
+    n = len(origins)
+    return (origins[index], directions[index], tmin[index] if len(tmin) == n else tmin,
+            tmax[index] if len(tmax) == n else tmax)
 
 
 def surface_fields(record, origins, directions, t, obj, slot, u, v, want_uv, want_normal,

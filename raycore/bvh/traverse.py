@@ -30,7 +30,7 @@ from raycore.bvh.simd import LANES, enter8, lowest_set_bit, prefetch_row, watert
 from raycore.primitives.analytic import DISK, PLANE, analytic_hit
 from raycore.primitives.triangle import WATERTIGHT, triangle_hit, watertight_setup
 
-CLOSEST, ANY, COUNT, ALL, PARITY = 0, 1, 2, 3, 4
+CLOSEST, ANY, COUNT, ALL, PARITY, LIST = 0, 1, 2, 3, 4, 5
 
 #: Object kind of a mesh instance; analytic kinds are the codes of ``raycore.primitives.analytic``.
 MESH = 16
@@ -338,7 +338,7 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
     ----------
     scene : SceneArrays
     mode : int
-        CLOSEST, ANY, COUNT, ALL or PARITY.
+        CLOSEST, ANY, COUNT, ALL, PARITY or LIST.
     test, sphere_method : int
         Triangle test and sphere method codes.
     ox, oy, oz, dx, dy, dz, tmin, tmax : float
@@ -523,6 +523,16 @@ def _face_id(scene, obj, prim):
     return np.int64(0)
 
 
+@njit(cache=True, forceinline=True, _nrt=False)
+def _list(scene, hit_t, hit_obj, hit_prim, kept, hits_t, hits_obj, hits_prim, at):
+    """ALL and LIST modes: copy a ray's ``kept`` merged crossings to the hit buffers from
+    ``at`` on, with face ids for mesh hits."""
+    for j in range(kept):
+        hits_t[at + j] = hit_t[j]
+        hits_obj[at + j] = hit_obj[j]
+        hits_prim[at + j] = _face_id(scene, hit_obj[j], hit_prim[j])
+
+
 @njit(cache=True, inline="always")
 def _bad_ray(origins, directions, i, lo, hi):
     """Whether ray ``i``, with bounds ``lo``, ``hi``, is one the library refuses: a non-finite
@@ -551,8 +561,8 @@ def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tma
     start, stop : int
     out_t, out_obj, out_prim : ndarray, shape (N,) or (0,)
         CLOSEST: t (inf on a miss), object (-1 on a miss) and primitive id (face index, or 0 for
-        an analytic shape; -1 on a miss).  COUNT, ALL and PARITY: ``out_obj`` receives each
-        ray's crossing count, or minus the crossings found when the hit list was too short.
+        an analytic shape; -1 on a miss).  COUNT, ALL, PARITY and LIST: ``out_obj`` receives
+        each ray's crossing count, or minus the crossings found when the hit list was too short.
     out_hit : ndarray of uint8, shape (N,) or (0,)
         ANY: 1 where the ray hits something.  PARITY: 1 where it crosses a closed object an
         odd number of times.
@@ -560,6 +570,9 @@ def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tma
         CLOSEST, when not empty: barycentrics and the slot of mesh hits (surface fields).
     offsets, hits_t, hits_obj, hits_prim : ndarray
         ALL: ray i's crossings go to ``[offsets[i], offsets[i + 1])`` of the hit buffers.
+        LIST: the hit buffers hold K = len(hits_t) // N crossings a ray, and rays ``start ..
+        stop - 1`` list theirs one after another in ``[K * start, K * stop)``; ``offsets[i]``
+        ((N,)) receives where ray i's begin, or -1 when they did not fit (nor are listed).
     int_row, real_row : ndarray
         The thread's scratch row (:func:`new_scratch`).
     capacity : int
@@ -577,6 +590,8 @@ def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tma
     hit_prim = int_row[INT_FIXED + capacity:INT_FIXED + 2 * capacity]
     hit_t = real_row[REAL_FIXED:REAL_FIXED + capacity]
     barycentrics = len(out_u) > 0
+    room = len(hits_t) // n if mode == LIST else 0
+    listed, end = room * start, room * stop
     first_bad = n
     for i in range(start, stop):
         lo = tmin[i * lo_step]
@@ -604,11 +619,15 @@ def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tma
             kept = merge_crossings(scene, hit_t, hit_obj, hit_prim, found)
             out_obj[i] = kept
             if mode == ALL:
-                at = offsets[i]
-                for j in range(kept):
-                    hits_t[at + j] = hit_t[j]
-                    hits_obj[at + j] = hit_obj[j]
-                    hits_prim[at + j] = _face_id(scene, hit_obj[j], hit_prim[j])
+                _list(scene, hit_t, hit_obj, hit_prim, kept, hits_t, hits_obj, hits_prim,
+                      offsets[i])
+            elif mode == LIST:
+                fits = listed + kept <= end
+                offsets[i] = listed if fits else -1
+                if fits:
+                    _list(scene, hit_t, hit_obj, hit_prim, kept, hits_t, hits_obj, hits_prim,
+                          listed)
+                    listed += kept
             elif mode == PARITY:
                 out_hit[i] = _odd_crossings(scene, hit_obj, kept)
     return first_bad

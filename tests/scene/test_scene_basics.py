@@ -5,6 +5,7 @@ import pytest
 
 from raycore import AllHits, Hits, Scene
 from raycore.bvh.traverse import HIT_CAPACITY
+from raycore.queries import LIST_ROOM
 
 RAYS = (np.zeros((3, 3)), np.array([[0.0, 0, 1], [0, 1, 0], [1, 0, 0]]))
 
@@ -74,11 +75,8 @@ def test_ids_are_the_add_order_and_results_have_fixed_types(dtype):
     assert hits.geom_id.tolist() == [1] and hits.t.tolist() == [6.0]
 
 
-def test_a_ray_crossing_more_surfaces_than_a_thread_lists_at_first(dtype):
-    # 100 parallel squares in one mesh: more crossings than HIT_CAPACITY, so that count and
-    # intersect_all run again with room for them all
-    layers = 100
-    assert layers > HIT_CAPACITY
+def stacked_squares(dtype, layers):
+    """A mesh of ``layers`` unit squares in the planes z = 0, 1, ..., each of two triangles."""
     z = np.repeat(np.arange(layers, dtype=float), 4)
     square = np.tile([[0.0, 0], [1, 0], [0, 1], [1, 1]], (layers, 1))
     vertices = np.column_stack([square, z])
@@ -86,6 +84,15 @@ def test_a_ray_crossing_more_surfaces_than_a_thread_lists_at_first(dtype):
     faces = (base + np.array([[0, 1, 2], [1, 3, 2]])).reshape(-1, 3)
     scene = Scene(dtype)
     scene.add_mesh(vertices, faces)
+    return scene
+
+
+def test_a_ray_crossing_more_surfaces_than_a_thread_lists_at_first(dtype):
+    # 100 parallel squares in one mesh: more crossings than HIT_CAPACITY, so that count and
+    # intersect_all run again with room for them all
+    layers = 100
+    assert layers > HIT_CAPACITY
+    scene = stacked_squares(dtype, layers)
     origins = [[0.3, 0.3, -1.0], [0.7, 0.1, 200.0], [5.0, 5.0, -1.0]]
     directions = [[0, 0, 1.0], [0, 0, -1.0], [0, 0, 1.0]]
     assert scene.count(origins, directions).tolist() == [layers, layers, 0]
@@ -95,3 +102,38 @@ def test_a_ray_crossing_more_surfaces_than_a_thread_lists_at_first(dtype):
     close = dict(rel=4 * float(np.finfo(dtype).eps))
     assert all_hits.t[:layers].tolist() == pytest.approx(np.arange(1.0, layers + 1), **close)
     assert all_hits.t[layers:].tolist() == pytest.approx(np.arange(101.0, 201.0), **close)
+
+
+def test_rays_listing_more_crossings_than_their_batch_has_room_for(dtype):
+    # intersect_all lists LIST_ROOM crossings a ray in one pass, shared within a work item; a
+    # ray through 20 squares takes the room of ten, so that in a large (grouped, parallel)
+    # batch where one ray in six goes through, some work items overflow and their rays are
+    # traced again into their places, beside rays listed in the pass
+    layers = 20
+    assert layers > 2 * LIST_ROOM
+    scene = stacked_squares(dtype, layers)
+    rng = np.random.default_rng(11)
+    n = 80_000
+    origins = np.column_stack([rng.uniform(-2.0, 1.5, n), rng.uniform(-0.5, 1.5, n),
+                               np.full(n, -1.0)])
+    directions = np.tile([0.0, 0.0, 1.0], (n, 1))
+    directions[::2, :2] = rng.normal(scale=0.01, size=(n // 2, 2))
+    all_hits = scene.intersect_all(origins, directions)
+    through = all_hits.counts == layers
+    assert set(np.unique(all_hits.counts)) <= set(range(layers + 1))
+    assert 0.1 < through.mean() < 0.3 and (all_hits.counts == 0).mean() > 0.5
+    np.testing.assert_array_equal(all_hits.counts, scene.count(origins, directions))
+    # each crossing at its plane, in order, on its ray
+    ray = all_hits.ray_index
+    layer = np.round(origins[ray, 2] + all_hits.t * directions[ray, 2]).astype(int)
+    starts = np.repeat(all_hits.offsets[:-1], all_hits.counts)
+    first = np.round(origins[ray, 2] + all_hits.t[starts] * directions[ray, 2]).astype(int)
+    np.testing.assert_array_equal(layer - first, np.arange(len(ray)) - starts)
+    point = origins[ray] + all_hits.t[:, None] * directions[ray]
+    assert np.all((point[:, :2] >= -1e-4) & (point[:, :2] <= 1 + 1e-4))
+    # the same answers as rays asked a few at a time (listed without running out of room)
+    pick = np.flatnonzero(through)[::997]
+    for i in pick:
+        alone = scene.intersect_all(origins[i:i + 1], directions[i:i + 1])
+        np.testing.assert_array_equal(alone.t, all_hits.t[all_hits.ray_index == i])
+        np.testing.assert_array_equal(alone.prim_id, all_hits.prim_id[all_hits.ray_index == i])
