@@ -74,6 +74,7 @@ BENCH_ARGS ?=
 bench: $(VENV)/.bench-installed
 	$(BIN)/python -m benchmarks.run $(BENCH_ARGS)
 	$(BIN)/python -m benchmarks.latency $(filter --quick,$(BENCH_ARGS))
+	$(BIN)/python -m benchmarks.dropin
 	$(BIN)/python -m benchmarks.service_bench $(filter --quick,$(BENCH_ARGS))
 	$(BIN)/python -m benchmarks.scene_file $(filter --no-large,$(BENCH_ARGS))
 	$(BIN)/python -m benchmarks.dask_bench
