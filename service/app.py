@@ -23,6 +23,7 @@ from service.demo import load_demo
 from service.errors import ClientError, validation_detail
 from service.methods import Methods
 from service.openapi import document
+from service.query_params import single_values
 from service.routes import health, meshes, pages, scenes
 from service.runtime import Runtime
 from service.schemas import error_responses
@@ -88,7 +89,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     # the docs page is served by routes.pages, with assets of its own rather than a CDN's
     app = FastAPI(title="raycore", version=version("raycore"),
                   description=DESCRIPTION + (KEY_DESCRIPTION if keyed else ""),
-                  lifespan=_lifespan, docs_url=None, redoc_url=None)
+                  lifespan=_lifespan, docs_url=None, redoc_url=None,
+                  dependencies=[Depends(single_values)])
     disk = None if settings.data_dir is None else DataDir(settings.data_dir, settings.data_bytes)
     app.state.runtime = Runtime(settings, Store(settings.store_bytes), disk)
     app.add_middleware(Methods)

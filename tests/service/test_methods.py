@@ -53,3 +53,19 @@ def test_strict_numbers(client, scene_id):
     assert client.post(f"/v1/scenes/{scene_id}/render", json=render).status_code == 422
     sphere = {**SPEC["objects"][0], "radius": "1"}
     assert client.post("/v1/scenes", json={"objects": [sphere]}).status_code == 422
+
+
+def test_a_repeated_single_valued_parameter_is_refused(client, scene_id):
+    # FastAPI would read the last value; the document declares one (schemathesis's ST201)
+    refused = client.get("/v1/scenes?offset=x&offset=0")
+    assert refused.status_code == 422
+    assert "offset" in refused.json()["detail"] and "2 times" in refused.json()["detail"]
+    assert client.get("/v1/meshes?limit=1&limit=2").status_code == 422
+    rays = {"origins": [[0, 0, -5]], "directions": [[0, 0, 1]]}
+    url = f"/v1/scenes/{scene_id}/intersect"
+    assert client.post(f"{url}?tmax=1&tmax=9", json=rays).status_code == 422
+    # fields is a list: repeating it is how a URL lists several
+    listed = client.post(f"{url}?fields=normal&fields=point", json=rays)
+    assert listed.status_code == 200, listed.text
+    assert {"normal", "point"} <= set(listed.json())
+    assert client.get("/v1/scenes?limit=2&offset=0").status_code == 200
