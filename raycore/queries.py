@@ -102,7 +102,8 @@ def _trace_here(record, mode, test, sphere_method, origins, directions, tmin, tm
 def _hits_here(record, mode, test, sphere_method, origins, directions, tmin, tmax, out_t, out_obj,
                out_prim, out_hit, int_scratch, real_scratch):
     """:func:`_trace_here` for closest hits without surface fields (CLOSEST) and any hits
-    (ANY): fewer arguments for the dispatcher to check (22 of them cost 1.5 us, 14 cost 0.9)."""
+    (ANY): fewer arguments to pass (through Numba's dispatcher 22 of them cost 1.5 us and 14
+    cost 0.9; called directly, as :func:`_call` does, each still costs its unboxing)."""
     no_reals = out_t[:0]
     no_ints = out_obj[:0]
     return trace_range(arrays_of(record), mode, test, sphere_method, origins, directions, tmin,
@@ -177,7 +178,8 @@ def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, o
         ``(u, v, slot)`` triple, ``hits`` the ``(t, obj, prim)`` buffers).
     group : bool
         Trace a large incoherent batch in a coherent order (:func:`grouping`); False for rays
-        grouped already.
+        grouped already, and for ALL and LIST, whose crossings go where ``offsets`` says for
+        each ray of the batch as given.
 
     Returns
     -------
@@ -227,7 +229,7 @@ def grouping(rays, threads):
     rays : tuple
         Copies of ``rays`` in that order; bounds shared by every ray stay shared.
     """
-    origins, directions, tmin, tmax = rays
+    origins, directions = rays[:2]
     n = len(origins)
     if n < GROUP_FROM:
         return None
@@ -236,11 +238,20 @@ def grouping(rays, threads):
     if not group_order(origins, directions, PARTS_PER_THREAD * threads, order,
                        np.empty(n, np.int16)):
         return None
-    grouped = (np.empty_like(origins), np.empty_like(directions),
-               np.empty_like(tmin) if len(tmin) == n else tmin,
-               np.empty_like(tmax) if len(tmax) == n else tmax)
-    gather_rays(order, *rays, *grouped)
-    return order, grouped
+    return order, _gathered(rays, order)
+
+
+def _gathered(rays, index):
+    """Copies of the rays ``index`` (an int64 array) of ``rays`` (:func:`raycore.rays.
+    ray_arrays`'s tuple), in NumPy's memory (see group_order); bounds shared by every ray stay
+    shared."""
+    origins, directions, tmin, tmax = rays
+    n, m = len(origins), len(index)
+    gathered = (np.empty((m, 3), origins.dtype), np.empty((m, 3), directions.dtype),
+                np.empty(m, tmin.dtype) if len(tmin) == n else tmin,
+                np.empty(m, tmax.dtype) if len(tmax) == n else tmax)
+    gather_rays(index, *rays, *gathered)
+    return gathered
 
 
 def _trace_in_chunks(arguments, threads):
@@ -378,7 +389,7 @@ def all_hits(scene, rays, test, sphere_method):
     _move_lists(listed_at, traced_counts, places, *listed, *hits)
     again = np.flatnonzero(listed_at < 0)
     if len(again):
-        trace(scene, ALL, _rays_at(traced, again), test, sphere_method,
+        trace(scene, ALL, _gathered(traced, again), test, sphere_method,
               out_obj=np.empty(len(again), np.int64), offsets=places[again], hits=hits,
               capacity=capacity, group=False)
     return first_bad, counts, *hits
@@ -398,15 +409,6 @@ def _move_lists(listed_at, counts, places, listed_t, listed_obj, listed_prim, hi
             hits_t[to + j] = listed_t[at + j]
             hits_obj[to + j] = listed_obj[at + j]
             hits_prim[to + j] = listed_prim[at + j]
-
-
-def _rays_at(rays, index):
-    """The rays ``index`` of ``rays`` (ray_arrays's tuple); bounds shared by every ray stay
-    shared."""
-    origins, directions, tmin, tmax = rays
-    n = len(origins)
-    return (origins[index], directions[index], tmin[index] if len(tmin) == n else tmin,
-            tmax[index] if len(tmax) == n else tmax)
 
 
 def surface_fields(record, origins, directions, t, obj, slot, u, v, want_uv, want_normal,

@@ -151,20 +151,21 @@ def group_order(origins, directions, parts, order, keys):
 @njit(cache=True, parallel=True)
 def gather_rays(order, origins, directions, tmin, tmax, grouped_origins, grouped_directions,
                 grouped_tmin, grouped_tmax):
-    """The rays in ``order`` (gathered: scattered reads cost less than scattered writes).
+    """The rays ``order`` (gathered: scattered reads cost less than scattered writes): all of
+    them in a new order, or some of them.
 
     Parameters
     ----------
-    order : ndarray of int64, shape (N,)
+    order : ndarray of int64, shape (M,)
     origins, directions : ndarray, shape (N, 3)
     tmin, tmax : ndarray, shape (N,) or (1,)
-    grouped_origins, grouped_directions : ndarray, shape (N, 3)
-    grouped_tmin, grouped_tmax : ndarray, shape (N,) or (1,)
+    grouped_origins, grouped_directions : ndarray, shape (M, 3)
+    grouped_tmin, grouped_tmax : ndarray, shape (M,) or (1,)
         Receive the rays in order, and per-ray bounds (a (1,) bound, shared by every ray, is
         left alone).
     """
-    n = len(order)
-    for k in prange(n):
+    n = len(origins)
+    for k in prange(len(order)):
         i = order[k]
         for a in range(3):
             grouped_origins[k, a] = origins[i, a]
