@@ -48,21 +48,26 @@ def enter8(typingctx, nodes, row, ray, tmin, tmax, entry):
                                          [row_v, ir.Constant(ir.IntType(64), 0)])
         vector = ir.VectorType(ir.FloatType(), WIDTH)
         first = builder.bitcast(start, vector.as_pointer())
-        planes = [builder.load(builder.gep(first, [ir.Constant(ir.IntType(64), k)]), align=4)
-                  for k in range(6)]
         values = [builder.extract_value(ray_v, k) for k in range(12)]
         near_origin, far_origin, reciprocal, padded = (values[k:k + 3] for k in range(0, 12, 3))
 
         def splat(value):
             return _splat(builder, vector, value)
 
+        def plane(index):
+            return builder.load(builder.gep(first, [index]), align=4)
+
+        int64 = ir.IntType(64)
         zero = ir.Constant(ir.FloatType(), 0.0)
         t_near = splat(tmin_v)
         t_far = splat(tmax_v)
         for axis in range(3):
+            # the near and far planes are chosen by an offset into the row (Embree's nearX),
+            # not by a select of vectors, which LLVM emits as a branch
             forward = builder.fcmp_ordered(">=", reciprocal[axis], zero)
-            near = builder.select(forward, planes[axis], planes[axis + 3])
-            far = builder.select(forward, planes[axis + 3], planes[axis])
+            low, high = ir.Constant(int64, axis), ir.Constant(int64, axis + 3)
+            near = plane(builder.select(forward, low, high))
+            far = plane(builder.select(forward, high, low))
             t = builder.fmul(builder.fsub(near, splat(near_origin[axis])),
                              splat(reciprocal[axis]))
             t_near = builder.select(builder.fcmp_ordered(">", t, t_near), t, t_near)
