@@ -24,7 +24,7 @@ from raycore.hits import SURFACE_FIELDS
 from raycore.offset import offset_ray_origin
 from raycore.primitives.analytic import SPHERE_METHODS
 from raycore.primitives.triangle import TRIANGLE_TESTS
-from raycore.queries import GROUP_FROM
+from raycore.queries import GROUP_FROM, GROUP_TREE_BYTES
 from raycore.render import SHADINGS, render
 from raycore.scene import Scene
 
@@ -121,14 +121,17 @@ def _everything_scene(dtype):
 
 
 def _large_build(dtype):
-    """Build a mesh large enough for every path of the parallel build: its top levels are
-    split on all cores (more than MIN_TASK triangles) and its subtrees are built and collapsed
-    as tasks.  Small meshes never reach those kernels, and an upload of a large one would compile
-    them in the service."""
-    size = math.isqrt(MIN_TASK // 2) + 1  # 2 * size**2 triangles
+    """Build a mesh large enough for every path of the parallel build (its top levels are
+    split on all cores, more than MIN_TASK triangles, and its subtrees are built and collapsed
+    as tasks) and for batches traced in a coherent order (a tree of GROUP_TREE_BYTES or more),
+    and query it with such batches.  Small meshes reach none of those kernels, and an upload of a
+    large one would compile them in the service."""
+    # a full leaf block holds four triangles in 36 values: more than 36 bytes a triangle
+    triangles = max(MIN_TASK, GROUP_TREE_BYTES // 36)
+    size = math.isqrt(triangles // 2) + 1  # 2 * size**2 triangles
     scene = Scene(dtype=dtype)
     scene.add_mesh(*_grid_mesh(size))
-    scene.intersect(*_rays(13, dtype))
+    _query_everything(scene, (GROUPED_BATCH,))
 
 
 def _scenes(dtype):
@@ -166,10 +169,10 @@ def _bounds(count, dtype):
     return (0.0, np.inf), (np.zeros(count, dtype), tmax)
 
 
-def _query_everything(scene):
+def _query_everything(scene, counts=BATCH_SIZES):
     """Every query, triangle test, sphere method and set of fields, with scalar and per-ray
-    bounds, on batches of every size."""
-    for count in (*BATCH_SIZES, GROUPED_BATCH):
+    bounds, on batches of ``counts`` rays."""
+    for count in counts:
         origins, directions = _rays(count, scene.dtype)
         # a grouped batch takes the others' kernels, and its own for the reordering, which the
         # triangle test and sphere method do not change

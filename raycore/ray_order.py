@@ -8,6 +8,8 @@ stanford-bunny and nefertiti (500k rays, 2 threads: 103 and 117 ns a ray, agains
 A full Morton sort of origins and directions gained no more.  The rays are copied in their new
 order rather than traced through an index: rays read out of order, and answers written out of
 order, cost the traversal more than the grouping gained, even with the next rays prefetched.
+Since the traversal got faster, only trees that outgrow the caches gain: the queries group a
+batch only when the scene's trees take ``raycore.queries.GROUP_TREE_BYTES`` or more.
 
 A batch that is coherent already (a camera, a LiDAR's rings, shadow rays from a camera's hits),
 whose neighbours mostly fall in one group, keeps its order: a sample of its neighbours says so

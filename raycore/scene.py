@@ -231,7 +231,7 @@ class Scene:
         top_nodes = self._top.nodes if len(self._top_slots) else empty_nodes
         mesh_nodes = _joined([m.bvh.nodes for m in self._meshes], empty_nodes)
         blocks = [m.leaf_blocks for m in self._meshes]
-        self._record = SceneRecord(
+        record = SceneRecord(
             top_nodes, top_nodes.view(np.int32), self._top_slots, self._direct,
             np.array(self._kind, np.int64), np.array(self._param_row, np.int64),
             np.array(self._mesh_of, np.int64), np.array(self._xform_row, np.int64),
@@ -242,6 +242,9 @@ class Scene:
             _joined([m.slot_face for m in self._meshes], np.zeros(0, np.int32)),
             _starts([len(m.bvh.nodes) for m in self._meshes]), _starts([len(b) for b in blocks]),
         )
+        record.tree_bytes = (top_nodes.nbytes + mesh_nodes.nbytes
+                             + sum(leaf_blocks.nbytes for leaf_blocks in blocks))
+        self._record = record
 
     def _scene(self):
         """The built scene's record, built first if the scene changed (once, under a lock, when

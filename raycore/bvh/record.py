@@ -35,7 +35,12 @@ class SceneRecordType(types.StructRef):
 
 
 class SceneRecord(structref.StructRefProxy):
-    """The arrays of a built scene, as one argument for compiled code (fields: :data:`FIELDS`)."""
+    """The arrays of a built scene, as one argument for compiled code (fields: :data:`FIELDS`).
+
+    Python code also reads ``tree_bytes``, set by the scene that packs the record: the bytes of
+    the wide rows and leaf blocks that traversal reads (a field read from Python would compile
+    a getter).
+    """
 
 
 structref.define_proxy(SceneRecord, SceneRecordType, list(FIELDS))

@@ -19,18 +19,20 @@ from .brute import random_scene, scene_rays
 SEED = 0
 
 
-def _grouped_batches(monkeypatch):
-    """The sizes of the batches that are grouped, as they are."""
+def _grouped_batches(monkeypatch, tree_bytes=0):
+    """The sizes of the batches that are grouped, as they are, with scenes' trees grouped from
+    ``tree_bytes`` on (the test scenes' trees are small)."""
     sizes = []
     grouping = queries.grouping
 
-    def counted(rays, threads):
-        grouped = grouping(rays, threads)
+    def counted(scene, rays, threads):
+        grouped = grouping(scene, rays, threads)
         if grouped is not None:
             sizes.append(len(grouped[0]))
         return grouped
 
     monkeypatch.setattr(queries, "grouping", counted)
+    monkeypatch.setattr(queries, "GROUP_TREE_BYTES", tree_bytes)
     return sizes
 
 
@@ -83,6 +85,19 @@ def test_contains_is_unchanged_by_grouping(monkeypatch):
     assert grouped, "contains' rays from scattered points must be grouped"
     pieces = np.concatenate([scene.contains(part) for part in np.array_split(points, 200)])
     assert np.array_equal(inside, pieces) and 0.01 < inside.mean() < 0.99
+
+
+def test_a_small_tree_keeps_the_batch_order(monkeypatch):
+    spec, _ = random_scene(SEED)
+    scene = spec.scene("float32")
+    _, *large = _large_shuffled("float32")
+    grouped = _grouped_batches(monkeypatch, queries.GROUP_TREE_BYTES)
+    scene.intersect(*large)
+    assert scene._record.tree_bytes < queries.GROUP_TREE_BYTES
+    assert grouped == []
+    monkeypatch.setattr(queries, "GROUP_TREE_BYTES", scene._record.tree_bytes)
+    scene.intersect(*large)
+    assert grouped == [len(large[0])]
 
 
 def test_a_camera_keeps_its_order(monkeypatch):
