@@ -63,7 +63,10 @@ LIST_ROOM = 2
 #: fandisk (0.3-1.1 MiB) 0.98-1.06 / 0.99-1.12 / 0.96-1.02; stanford-bunny and nefertiti in
 #: float32 (3.6, 5.0 MiB) 1.01-1.03 / 1.04-1.06 / 0.98; in float64 (6.1, 8.7 MiB) 0.98-0.99 /
 #: 0.97-1.0 / 0.95; nefertiti subdivided to 1.6M triangles (83, 142 MiB), 250k rays: 0.86-0.96 /
-#: 0.90-0.98 / 0.95-0.96.
+#: 0.90-0.98 / 0.95-0.96.  ``intersect_all``, whose lists are put back too: 1.15-1.40 on suzanne,
+#: teapot, fandisk and stanford-bunny, 0.91 on nefertiti-1.6M.  ``contains`` is grouped on every
+#: tree: its rays share one direction, so grouping their origins makes them coherent (0.85-0.97
+#: on the same small meshes, 0.78 on nefertiti-1.6M).
 GROUP_FROM = 65536
 GROUP_TREE_BYTES = 6 << 20
 PARTS_PER_THREAD = 2
@@ -215,16 +218,17 @@ def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, o
                  int_scratch, real_scratch, capacity)
     if serial:
         return _call(_trace_here, *arguments)
-    grouped = grouping(scene, rays, threads) if group else None
+    grouped = grouping(scene, rays, threads, mode) if group else None
     if grouped is not None:
         return _trace_grouped(*grouped, arguments, threads)
     return _trace_in_chunks(arguments, threads)
 
 
-def grouping(scene, rays, threads):
+def grouping(scene, rays, threads, mode):
     """``(order, rays)``: the batch's rays in the order they trace fastest in
     (:mod:`raycore.ray_order`), and where each comes from; None for a batch that is small or
-    coherent already, or a scene whose trees are small (see GROUP_TREE_BYTES).
+    coherent already, or, unless ``mode`` is PARITY, a scene whose trees are small (see
+    GROUP_TREE_BYTES).
 
     Parameters
     ----------
@@ -232,6 +236,8 @@ def grouping(scene, rays, threads):
     rays : tuple
         ``(origins, directions, tmin, tmax)`` as :func:`raycore.rays.ray_arrays` gives them.
     threads : int
+    mode : int
+        The query's trace mode.
 
     Returns
     -------
@@ -241,7 +247,7 @@ def grouping(scene, rays, threads):
     """
     origins, directions = rays[:2]
     n = len(origins)
-    if n < GROUP_FROM or scene.tree_bytes < GROUP_TREE_BYTES:
+    if n < GROUP_FROM or (mode != PARITY and scene.tree_bytes < GROUP_TREE_BYTES):
         return None
     # NumPy's arrays, not Numba's: see group_order
     order = np.empty(n, np.int64)
@@ -376,7 +382,7 @@ def all_hits(scene, rays, test, sphere_method):
     # moved to exactly-sized arrays, and only rays that found no room are traced again (a
     # count pass and a fill pass traced every ray twice).  A batch is grouped once.
     n = len(rays[0])
-    grouped = grouping(scene, rays, get_num_threads()) if n >= SERIAL_BELOW else None
+    grouped = grouping(scene, rays, get_num_threads(), LIST) if n >= SERIAL_BELOW else None
     order, traced = (np.arange(0), rays) if grouped is None else grouped
     listed_at = np.empty(n, np.int64)
     listed = (np.empty(LIST_ROOM * n, rays[0].dtype), np.empty(LIST_ROOM * n, np.int64),

@@ -25,8 +25,8 @@ def _grouped_batches(monkeypatch, tree_bytes=0):
     sizes = []
     grouping = queries.grouping
 
-    def counted(scene, rays, threads):
-        grouped = grouping(scene, rays, threads)
+    def counted(scene, rays, threads, mode):
+        grouped = grouping(scene, rays, threads, mode)
         if grouped is not None:
             sizes.append(len(grouped[0]))
         return grouped
@@ -80,7 +80,8 @@ def test_contains_is_unchanged_by_grouping(monkeypatch):
     spec, _ = random_scene(SEED)
     scene = spec.scene("float64")
     points = np.random.default_rng(3).uniform(-9, 9, (queries.GROUP_FROM, 3))
-    grouped = _grouped_batches(monkeypatch)
+    # on any tree, however small
+    grouped = _grouped_batches(monkeypatch, queries.GROUP_TREE_BYTES)
     inside = scene.contains(points)
     assert grouped, "contains' rays from scattered points must be grouped"
     pieces = np.concatenate([scene.contains(part) for part in np.array_split(points, 200)])
