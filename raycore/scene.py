@@ -231,6 +231,7 @@ class Scene:
         top_nodes = self._top.nodes if len(self._top_slots) else empty_nodes
         mesh_nodes = _joined([m.bvh.nodes for m in self._meshes], empty_nodes)
         blocks = [m.leaf_blocks for m in self._meshes]
+        all_blocks = _joined(blocks, np.zeros((0, BLOCK), dtype))
         record = SceneRecord(
             top_nodes, top_nodes.view(np.int32), self._top_slots, self._direct,
             np.array(self._kind, np.int64), np.array(self._param_row, np.int64),
@@ -238,12 +239,11 @@ class Scene:
             np.array(self._params, dtype=dtype).reshape(-1, analytic.PARAM_WIDTH),
             np.array(self._xforms, dtype=dtype).reshape(-1, 12),
             mesh_nodes, mesh_nodes.view(np.int32),
-            _joined(blocks, np.zeros((0, BLOCK), dtype)),
+            all_blocks,
             _joined([m.slot_face for m in self._meshes], np.zeros(0, np.int32)),
             _starts([len(m.bvh.nodes) for m in self._meshes]), _starts([len(b) for b in blocks]),
         )
-        record.tree_bytes = (top_nodes.nbytes + mesh_nodes.nbytes
-                             + sum(leaf_blocks.nbytes for leaf_blocks in blocks))
+        record.tree_bytes = top_nodes.nbytes + mesh_nodes.nbytes + all_blocks.nbytes
         self._record = record
 
     def _scene(self):

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from raycore import AllHits, Hits, Scene
+from raycore import AllHits, Hits, Scene, queries
 from raycore.bvh.traverse import HIT_CAPACITY
 from raycore.queries import LIST_ROOM
 
@@ -104,11 +104,13 @@ def test_a_ray_crossing_more_surfaces_than_a_thread_lists_at_first(dtype):
     assert all_hits.t[layers:].tolist() == pytest.approx(np.arange(101.0, 201.0), **close)
 
 
-def test_rays_listing_more_crossings_than_their_batch_has_room_for(dtype):
+def test_rays_listing_more_crossings_than_their_batch_has_room_for(dtype, monkeypatch):
     # intersect_all lists LIST_ROOM crossings a ray in one pass, shared within a work item; a
     # ray through 20 squares takes the room of ten, so that in a large (grouped, parallel)
     # batch where one ray in six goes through, some work items overflow and their rays are
-    # traced again into their places, beside rays listed in the pass
+    # traced again into their places, beside rays listed in the pass.  The squares' tree is
+    # small: grouped only with the size threshold lifted.
+    monkeypatch.setattr(queries, "GROUP_TREE_BYTES", 0)
     layers = 20
     assert layers > 2 * LIST_ROOM
     scene = stacked_squares(dtype, layers)
