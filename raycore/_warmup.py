@@ -126,7 +126,8 @@ def _large_build(dtype):
     as tasks) and for batches traced in a coherent order (a tree of GROUP_TREE_BYTES or more),
     and query it with such batches.  Small meshes reach none of those kernels, and an upload of a
     large one would compile them in the service."""
-    # a full leaf block holds four triangles in 36 values: more than 36 bytes a triangle
+    # a full leaf block holds eight float32 or four float64 triangles in 288 bytes: 36 bytes
+    # a triangle, and the wide rows come on top
     triangles = max(MIN_TASK, GROUP_TREE_BYTES // 36)
     size = math.isqrt(triangles // 2) + 1  # 2 * size**2 triangles
     scene = Scene(dtype=dtype)

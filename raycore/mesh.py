@@ -16,7 +16,7 @@ from raycore.bvh.records import (
     round_down32,
     round_up32,
 )
-from raycore.bvh.simd import LANES
+from raycore.bvh.simd import lanes_for
 from raycore.rays import as_float_array
 
 #: Faces per parallel work item of the passes over faces below.
@@ -135,7 +135,7 @@ class Mesh:
         self.bvh = self.leaf_blocks = self.slot_face = self._built_for = None
         # the SAH prices a leaf by the blocks its triangles fill
         bvh = build_bvh_from_records(triangle_records(vertices, self.faces), lo, hi,
-                                     replace(params, block_size=LANES))
+                                     replace(params, block_size=lanes_for(dtype)))
         self.leaf_blocks, self.slot_face = pack_leaves(bvh.nodes, bvh.refs, bvh.order, vertices,
                                                        self.faces, dtype)
         # slot_face replaces the leaf order, and the leaves now point at blocks

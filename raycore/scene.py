@@ -14,7 +14,7 @@ from raycore import queries, scene_file
 from raycore.bvh.build import BuildParams
 from raycore.bvh.layout import NODE_WIDTH, build_bvh
 from raycore.bvh.record import SceneRecord
-from raycore.bvh.simd import BLOCK
+from raycore.bvh.simd import block_width
 from raycore.bvh.traverse import MESH
 from raycore.hits import AllHits, Hits, check_fields
 from raycore.integrations import open3d as _open3d
@@ -43,10 +43,11 @@ class Scene:
         Precision of the stored geometry and of every kernel.
     bins, max_leaf_size, traversal_cost, intersection_cost
         SAH build parameters of the meshes' trees (see :class:`raycore.bvh.build.BuildParams`).
-        A mesh's leaf triangles are tested four at a time, and the SAH prices a leaf by the
-        blocks of four it fills (as Embree's builder does): leaves of up to 8 at a cost of 1.0
-        a block made trees of 57-60 B per triangle (73 B when pricing each triangle at 0.4)
-        that traced random rays 4-8 % faster (stanford-bunny, one thread).  The
+        A mesh's leaf triangles are tested a block at a time (eight float32 or four float64:
+        :mod:`raycore.bvh.leaves`), and the SAH prices a leaf by the blocks it fills (as
+        Embree's builder does): leaves of up to 8 at a cost of 1.0 a block of four made trees
+        of 57-60 B per triangle (73 B when pricing each triangle at 0.4) that traced random rays
+        4-8 % faster (stanford-bunny, one thread).  The
         top-level tree over objects, each tested on its own, keeps the default costs, with
         ``bins``.
 
@@ -231,7 +232,7 @@ class Scene:
         top_nodes = self._top.nodes if len(self._top_slots) else empty_nodes
         mesh_nodes = _joined([m.bvh.nodes for m in self._meshes], empty_nodes)
         blocks = [m.leaf_blocks for m in self._meshes]
-        all_blocks = _joined(blocks, np.zeros((0, BLOCK), dtype))
+        all_blocks = _joined(blocks, np.zeros((0, block_width(dtype)), dtype))
         record = SceneRecord(
             top_nodes, top_nodes.view(np.int32), self._top_slots, self._direct,
             np.array(self._kind, np.int64), np.array(self._param_row, np.int64),

@@ -15,14 +15,14 @@ import numpy as np
 from raycore import arrayfile
 from raycore.bvh.build import MAX_DEPTH
 from raycore.bvh.layout import BVH, NODE_WIDTH
-from raycore.bvh.simd import BLOCK, LANES
+from raycore.bvh.simd import VECTOR_BYTES, block_width, lanes_for
 from raycore.bvh.traverse import MESH
 from raycore.bvh.validate import check_tree
 from raycore.mesh import Mesh
 from raycore.primitives import analytic
 
 #: The BVH layout the stored trees are in; a file made for another is refused (rebuild it).
-LAYOUT = {"node_width": NODE_WIDTH, "block": BLOCK, "lanes": LANES, "max_depth": MAX_DEPTH}
+LAYOUT = {"node_width": NODE_WIDTH, "block_vector_bytes": VECTOR_BYTES, "max_depth": MAX_DEPTH}
 _ANALYTIC_KINDS = (analytic.SPHERE, analytic.PLANE, analytic.DISK, analytic.BOX,
                    analytic.TRANSFORMED_BOX, analytic.CYLINDER, analytic.CONE)
 _TREE_STATS = ("depth", "node_count", "leaf_count", "sah_cost")
@@ -165,11 +165,11 @@ def _restore(Scene, meta, arrays):
                         take(f"mesh{i}.faces", np.int64, (None, 3)))
         except ValueError as error:
             raise ValueError(f"the scene file is corrupt (mesh {i}: {error})") from error
-        blocks = take(f"mesh{i}.blocks", dtype, (None, BLOCK))
-        slot_face = take(f"mesh{i}.slot_face", np.int32, (LANES * len(blocks),))
+        blocks = take(f"mesh{i}.blocks", dtype, (None, block_width(dtype)))
+        slot_face = take(f"mesh{i}.slot_face", np.int32, (lanes_for(dtype) * len(blocks),))
         _within(slot_face, -1, len(mesh.faces), f"mesh {i}'s face indices")
         bvh = _bvh(take, f"mesh{i}", stats, None)
-        _checked_tree(bvh.nodes, len(blocks), LANES, f"mesh {i}")
+        _checked_tree(bvh.nodes, len(blocks), lanes_for(dtype), f"mesh {i}")
         mesh.restore(bvh, blocks, slot_face, dtype, scene.build_params, stats["build_seconds"])
         scene._meshes.append(mesh)
 

@@ -1,13 +1,14 @@
-"""Leaf triangles stored four to a block, plane by plane, for the vector triangle test.
+"""Leaf triangles stored in blocks, plane by plane, for the vector triangle test.
 
-A mesh's leaves are packed into blocks of :data:`~raycore.bvh.simd.LANES` triangles, each block
-one row of :data:`~raycore.bvh.simd.BLOCK` values in the scene's precision: the x of the four
-first vertices, then their y and z, then the second and third vertices alike (Embree's
-Triangle4v).  One vector instruction then works on four triangles
-(:func:`raycore.bvh.simd.watertight4`).  A leaf of ``count`` triangles takes ``ceil(count / 4)``
-consecutive blocks; the lanes left over are NaN, which no ray hits.
+A mesh's leaves are packed into blocks of L triangles, as many as a 256-bit vector holds
+coordinates in the scene's precision (eight float32 or four float64:
+:func:`~raycore.bvh.simd.lanes_for`).  A block is one row of 9 * L values: the x of the L first
+vertices, then their y and z, then the second and third vertices alike (Embree's Triangle8v and
+Triangle4v).  One vector instruction then works on a block's triangles
+(:func:`raycore.bvh.simd.watertight_block`).  A leaf of ``count`` triangles takes
+``ceil(count / L)`` consecutive blocks; the lanes left over are NaN, which no ray hits.
 
-A triangle's *slot* is ``4 * block + lane``.  Degenerate triangles (the cross product of their
+A triangle's *slot* is ``L * block + lane``.  Degenerate triangles (the cross product of their
 edges is exactly zero in the scene's precision, which every triangle test rejects) are stored
 as NaN too: the test need not look for them.
 """
@@ -16,33 +17,34 @@ import numpy as np
 from numba import njit
 
 from raycore.bvh.layout import COUNTS, REFS, WIDTH
-from raycore.bvh.simd import BLOCK, LANES
+from raycore.bvh.simd import block_lanes, block_width, lanes_for
 
 
 @njit(cache=True)
 def _fill_blocks(vertices, faces, order, leaf_first, leaf_count, leaf_block, blocks, slot_face):
+    lanes = block_lanes(blocks)
     for leaf in range(len(leaf_first)):
         for k in range(leaf_count[leaf]):
             face = order[leaf_first[leaf] + k]
-            slot = LANES * leaf_block[leaf] + k
-            block = slot // LANES
-            lane = slot % LANES
+            slot = lanes * leaf_block[leaf] + k
+            block = slot // lanes
+            lane = slot % lanes
             slot_face[slot] = face
             for vertex in range(3):
                 for axis in range(3):
-                    blocks[block, (3 * vertex + axis) * LANES + lane] = vertices[
+                    blocks[block, (3 * vertex + axis) * lanes + lane] = vertices[
                         faces[face, vertex], axis]
             # the edges' cross product as the triangle tests compute it, in the scene's precision
             row = blocks[block]
-            ax, ay, az = row[lane], row[LANES + lane], row[2 * LANES + lane]
-            e1x, e1y, e1z = row[3 * LANES + lane] - ax, row[4 * LANES + lane] - ay, row[
-                5 * LANES + lane] - az
-            e2x, e2y, e2z = row[6 * LANES + lane] - ax, row[7 * LANES + lane] - ay, row[
-                8 * LANES + lane] - az
+            ax, ay, az = row[lane], row[lanes + lane], row[2 * lanes + lane]
+            e1x, e1y, e1z = row[3 * lanes + lane] - ax, row[4 * lanes + lane] - ay, row[
+                5 * lanes + lane] - az
+            e2x, e2y, e2z = row[6 * lanes + lane] - ax, row[7 * lanes + lane] - ay, row[
+                8 * lanes + lane] - az
             if (e1y * e2z - e1z * e2y == 0 and e1z * e2x - e1x * e2z == 0
                     and e1x * e2y - e1y * e2x == 0):
                 for j in range(9):
-                    row[j * LANES + lane] = np.nan
+                    row[j * lanes + lane] = np.nan
 
 
 def pack_leaves(nodes, refs, order, vertices, faces, dtype):
@@ -63,8 +65,9 @@ def pack_leaves(nodes, refs, order, vertices, faces, dtype):
 
     Returns
     -------
-    blocks : ndarray of dtype, shape (B, BLOCK)
-    slot_face : ndarray of int32, shape (4 * B,)
+    blocks : ndarray of dtype, shape (B, 9 * L)
+        L = :func:`~raycore.bvh.simd.lanes_for` (dtype).
+    slot_face : ndarray of int32, shape (L * B,)
         Face index of each slot; -1 for padding lanes.
     """
     counts = refs[:, COUNTS:COUNTS + WIDTH]
@@ -74,12 +77,13 @@ def pack_leaves(nodes, refs, order, vertices, faces, dtype):
     leaf_count = counts[is_leaf].astype(np.int64)
     # blocks are laid out in leaf order, so that a subtree's triangles stay together in memory
     by_first = np.argsort(leaf_first, kind="stable")
-    sizes = -(-leaf_count[by_first] // LANES)
+    lanes = lanes_for(dtype)
+    sizes = -(-leaf_count[by_first] // lanes)
     leaf_block = np.empty_like(leaf_first)
     leaf_block[by_first] = np.cumsum(sizes) - sizes
     block_count = int(sizes.sum())
-    blocks = np.full((block_count, BLOCK), np.nan, dtype)
-    slot_face = np.full(block_count * LANES, -1, np.int32)
+    blocks = np.full((block_count, block_width(dtype)), np.nan, dtype)
+    slot_face = np.full(block_count * lanes, -1, np.int32)
     _fill_blocks(vertices, faces, order, leaf_first, leaf_count, leaf_block, blocks, slot_face)
     firsts[is_leaf] = leaf_block
     return blocks, slot_face

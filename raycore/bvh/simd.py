@@ -5,10 +5,12 @@ a wide node's eight child boxes is written as a Numba intrinsic over ``<8 x floa
 for rays of either precision: eight boxes cost about as much as one scalar box test.
 """
 
+import numpy as np
 from llvmlite import ir
 from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
+from numba.np.numpy_support import as_dtype
 
 #: Children per wide node.
 WIDTH = 8
@@ -128,16 +130,45 @@ def lowest_set_bit(typingctx, mask):
     return sig, codegen
 
 
-#: Triangles per leaf block, and the values a block holds: the nine vertex coordinates, each
-#: stored for the four triangles side by side (a.x[4], a.y[4], a.z[4], b.x[4], ..., c.z[4]).
-LANES = 4
-BLOCK = 9 * LANES
+#: A leaf block holds as many triangles as one 256-bit vector holds coordinates: eight in
+#: float32, four in float64 (Embree's Triangle8v and Triangle4v).  Each of the nine vertex
+#: coordinates is stored for the block's triangles side by side (a.x[L], a.y[L], a.z[L], b.x[L],
+#: ..., c.z[L]), so that a block takes 288 bytes in either precision.  Eight float32 lanes cost
+#: what four did and halve the blocks a leaf of up to eight needs: random rays 2-8 % faster and
+#: camera rays 3-7 % (one thread, float32, stanford-bunny, nefertiti, teapot, suzanne); eight
+#: float64 lanes (512 bits) made nefertiti's random rays 5 % slower, and sixteen float32 lanes
+#: 7-31 % slower.
+VECTOR_BYTES = 32
+MAX_LANES = VECTOR_BYTES // 4
+
+
+def lanes_for(dtype):
+    """Triangles per leaf block in precision ``dtype``."""
+    return VECTOR_BYTES // np.dtype(dtype).itemsize
+
+
+def block_width(dtype):
+    """Values per leaf block (a row of a mesh's blocks) in precision ``dtype``."""
+    return 9 * lanes_for(dtype)
 
 
 @intrinsic
-def watertight4(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin, tmax, out):
-    """The watertight test (``raycore.primitives.triangle.watertight``) against the four
-    triangles of a leaf block at once, without branches.
+def block_lanes(typingctx, blocks):
+    """Compiled :func:`lanes_for` of leaf blocks ``blocks`` (B, 9 * L): L, a constant of their
+    type, so that slot arithmetic compiles to shifts."""
+    lanes = lanes_for(as_dtype(blocks.dtype))
+
+    def codegen(context, builder, signature, args):
+        return ir.Constant(ir.IntType(64), lanes)
+
+    return types.int64(blocks), codegen
+
+
+@intrinsic
+def watertight_block(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin, tmax,
+                     out):
+    """The watertight test (``raycore.primitives.triangle.watertight``) against the L triangles
+    of a leaf block at once (:func:`lanes_for`), without branches.
 
     Every lane repeats the scalar test's operations in the same order (no contraction into
     fused multiply-adds), so a lane's ``t``, ``u``, ``v`` equal the scalar test's bit for bit.
@@ -145,21 +176,21 @@ def watertight4(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tm
 
     Parameters
     ----------
-    blocks : ndarray, shape (B, BLOCK)
+    blocks : ndarray, shape (B, 9 * L)
         Leaf blocks in the rays' precision.
     block : int
         Row of ``blocks``.
     ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin, tmax
         The ray and its ``watertight_setup`` values.
-    out : ndarray, shape (>= 3 * LANES,)
-        Receives t, u and v of the four lanes (``out[0:4]``, ``out[4:8]``, ``out[8:12]``),
+    out : ndarray, shape (>= 3 * L,)
+        Receives t, u and v of the L lanes (``out[0:L]``, ``out[L:2L]``, ``out[2L:3L]``),
         meaningful where the lane's hit bit is set.
 
     Returns
     -------
     int64
-        Bits 0-3: lanes hit.  Bits 4-7: lanes where an edge function rounded to 0, whose sign
-        must be settled exactly by the scalar test (they are not in bits 0-3).
+        Bits 0 to L - 1: lanes hit.  Bits L to 2L - 1: lanes where an edge function rounded to
+        0, whose sign must be settled exactly by the scalar test (they are not hit bits).
     """
     sig = types.int64(blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin, tmax, out)
 
@@ -167,7 +198,8 @@ def watertight4(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tm
         blocks_v, block_v, ox_v, oy_v, oz_v, kx_v, ky_v, kz_v, sx_v, sy_v, sz_v, lo_v, hi_v, \
             out_v = args
         scalar = context.get_value_type(signature.args[2])
-        vector = ir.VectorType(scalar, LANES)
+        lanes = lanes_for(as_dtype(signature.args[0].dtype))
+        vector = ir.VectorType(scalar, lanes)
         int64 = ir.IntType(64)
         table = context.make_array(signature.args[0])(context, builder, blocks_v)
         start = cgutils.get_item_pointer(context, builder, signature.args[0], table,
@@ -207,7 +239,7 @@ def watertight4(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tm
         u_a = edge(b_x, b_y, c_x, c_y)
         v_b = edge(c_x, c_y, a_x, a_y)
         w_c = edge(a_x, a_y, b_x, b_y)
-        zero = ir.Constant(vector, [0.0] * LANES)
+        zero = ir.Constant(vector, [0.0] * lanes)
 
         def all3(op, x, y, z):
             return builder.and_(builder.and_(builder.fcmp_ordered(op, x, zero),
@@ -236,7 +268,7 @@ def watertight4(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tm
         candidate = builder.and_(builder.and_(inside, in_range),
                                  builder.fcmp_ordered("!=", det, zero))
         candidate = builder.and_(candidate, builder.not_(exact))
-        bits = ir.IntType(LANES)
+        bits = ir.IntType(lanes)
         exact_bits = builder.zext(builder.bitcast(exact, bits), int64)
         # Most blocks hit nothing: the three divisions wait until a lane is a candidate.
         before = builder.basic_block
@@ -257,6 +289,6 @@ def watertight4(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tm
         hit_bits = builder.phi(int64)
         hit_bits.add_incoming(ir.Constant(int64, 0), before)
         hit_bits.add_incoming(found, tested)
-        return builder.or_(hit_bits, builder.shl(exact_bits, ir.Constant(int64, LANES)))
+        return builder.or_(hit_bits, builder.shl(exact_bits, ir.Constant(int64, lanes)))
 
     return sig, codegen

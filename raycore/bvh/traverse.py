@@ -2,10 +2,10 @@
 
 One routine serves every query (``mode``): the top-level BVH over objects (analytic shapes and
 mesh instances) and, inside a mesh, the mesh's own BVH in object space, whose leaves are blocks
-of four triangles tested at once (:mod:`raycore.bvh.leaves`, :func:`~raycore.bvh.simd.
-watertight4`).  :func:`trace_range` traces a range of rays with the scratch (traversal stacks,
-hit lists) of the thread that runs it; the caller owns the scratch (:func:`new_scratch`) and
-keeps it between calls.
+of eight float32 or four float64 triangles tested at once (:mod:`raycore.bvh.leaves`,
+:func:`~raycore.bvh.simd.watertight_block`).  :func:`trace_range` traces a range of rays with
+the scratch (traversal stacks, hit lists) of the thread that runs it; the caller owns the
+scratch (:func:`new_scratch`) and keeps it between calls.
 
 The kernels are compiled without Numba's reference counting (``_nrt=False``): every array they
 touch is borrowed from the caller.  With reference counts, each helper's array arguments cost
@@ -26,7 +26,14 @@ from numba import njit
 from raycore._fp import gamma, like, unit_roundoff
 from raycore.bvh.build import MAX_DEPTH
 from raycore.bvh.layout import COUNTS, REFS, WIDTH
-from raycore.bvh.simd import LANES, enter8, lowest_set_bit, prefetch_row, watertight4
+from raycore.bvh.simd import (
+    MAX_LANES,
+    block_lanes,
+    enter8,
+    lowest_set_bit,
+    prefetch_row,
+    watertight_block,
+)
 from raycore.primitives.analytic import DISK, PLANE, analytic_hit
 from raycore.primitives.triangle import WATERTIGHT, triangle_hit, watertight_setup
 
@@ -46,9 +53,9 @@ STACK_SIZE = (WIDTH - 1) * MAX_DEPTH + 2
 HIT_CAPACITY = 64
 
 #: Scratch elements per thread besides the hit list: leaf lists and two stacks (integers); entry
-#: distances, the four lanes' t, u, v, and the stacks' distances (reals).
+#: distances, a leaf block's lanes' t, u, v, and the stacks' distances (reals).
 INT_FIXED = 4 * WIDTH + 2 * STACK_SIZE
-REAL_FIXED = WIDTH + 3 * LANES + 2 * STACK_SIZE
+REAL_FIXED = WIDTH + 3 * MAX_LANES + 2 * STACK_SIZE
 
 #: Bytes of a cache line, and the least left unused after each thread's row: two threads' scratch
 #: never share a line (that false sharing made a ray that misses the mesh three times slower),
@@ -230,7 +237,8 @@ def _record(hit_t, hit_obj, hit_prim, found, t, obj, prim):
 @njit(cache=True, inline="always")
 def slot_value(blocks, slot, value):
     """Value ``value`` (0..8: a.x, a.y, a.z, b.x, ..., c.z) of the triangle in ``slot``."""
-    return blocks[slot // LANES, value * LANES + slot % LANES]
+    lanes = block_lanes(blocks)
+    return blocks[slot // lanes, value * lanes + slot % lanes]
 
 
 @njit(cache=True, forceinline=True, error_model="numpy", _nrt=False)
@@ -253,8 +261,9 @@ def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj
     leaf_count = int_row[3 * WIDTH:4 * WIDTH]
     stack = int_row[4 * WIDTH + STACK_SIZE:INT_FIXED]
     entry = real_row[:WIDTH]
-    lanes = real_row[WIDTH:WIDTH + 3 * LANES]
-    stack_t = real_row[WIDTH + 3 * LANES + STACK_SIZE:REAL_FIXED]
+    width = block_lanes(blocks)
+    lanes = real_row[WIDTH:WIDTH + 3 * MAX_LANES]
+    stack_t = real_row[WIDTH + 3 * MAX_LANES + STACK_SIZE:REAL_FIXED]
     box = _box_ray(ox, oy, oz, dx, dy, dz)
     # the watertight set-up waits for the first leaf: most rays that miss never reach one
     sheared = False
@@ -275,20 +284,22 @@ def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj
             sheared = True
         for leaf in range(leaves):
             first = block0 + leaf_first[leaf]
-            for block in range(first, first + (leaf_count[leaf] + LANES - 1) // LANES):
+            count = leaf_count[leaf]
+            for block in range(first, first + (count + width - 1) // width):
                 if test == WATERTIGHT:
-                    bits = watertight4(blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin,
-                                       best_t, lanes)
-                    exact = bits >> LANES
-                    hits = bits & (2**LANES - 1)
+                    bits = watertight_block(blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz,
+                                            tmin, best_t, lanes)
+                    exact = bits >> width
+                    hits = bits & ((1 << width) - 1)
                 else:
-                    exact = 2**LANES - 1
+                    # the leaf's triangles in this block, not its padding lanes
+                    exact = (1 << min(width, count - (block - first) * width)) - 1
                     hits = 0
                 # lanes the vector test could not settle (or a test without one): scalar tests
                 while exact:
                     lane = lowest_set_bit(exact)
                     exact &= exact - 1
-                    slot = LANES * block + lane
+                    slot = width * block + lane
                     t, u, w = triangle_hit(
                         test, ox, oy, oz, dx, dy, dz, kx, ky, kz, sx, sy, sz, tmin, best_t,
                         slot_value(blocks, slot, 0), slot_value(blocks, slot, 1),
@@ -298,8 +309,8 @@ def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj
                         slot_value(blocks, slot, 8))
                     if t < np.inf:
                         lanes[lane] = t
-                        lanes[LANES + lane] = u
-                        lanes[2 * LANES + lane] = w
+                        lanes[width + lane] = u
+                        lanes[2 * width + lane] = w
                         hits |= 1 << lane
                 while hits:
                     lane = lowest_set_bit(hits)
@@ -307,14 +318,14 @@ def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj
                     t = lanes[lane]
                     if mode >= COUNT:
                         found = _record(hit_t, hit_obj, hit_prim, found, t, obj,
-                                        LANES * block + lane)
+                                        width * block + lane)
                         continue
                     if t <= best_t:
                         best_t = t
                         lo, hi = _bounds32(tmin, best_t)
-                        best_slot = LANES * block + lane
-                        best_u = lanes[LANES + lane]
-                        best_v = lanes[2 * LANES + lane]
+                        best_slot = width * block + lane
+                        best_u = lanes[width + lane]
+                        best_v = lanes[2 * width + lane]
                         if mode == ANY:
                             return best_t, best_slot, best_u, best_v, found
         if next_row >= 0:
@@ -368,7 +379,7 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
     leaf_count = int_row[WIDTH:2 * WIDTH]
     stack = int_row[4 * WIDTH:4 * WIDTH + STACK_SIZE]
     entry = real_row[:WIDTH]
-    stack_t = real_row[WIDTH + 3 * LANES:WIDTH + 3 * LANES + STACK_SIZE]
+    stack_t = real_row[WIDTH + 3 * MAX_LANES:WIDTH + 3 * MAX_LANES + STACK_SIZE]
     best_t = tmax
     best_obj = -1
     best_prim = -1

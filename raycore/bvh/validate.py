@@ -23,8 +23,8 @@ def check_tree(nodes, leaf_limit, blocks, name):
     leaf_limit : int
         Leaves reference items ``ref .. ref + ceil(count / blocks) - 1``, all below this.
     blocks : int
-        Primitives per item a leaf references: 1 for a top-level tree's objects, LANES for a
-        mesh's blocks of triangles.
+        Primitives per item a leaf references: 1 for a top-level tree's objects, a block's
+        lanes for a mesh's blocks of triangles (:func:`raycore.bvh.simd.lanes_for`).
     name : str
         What the tree is, for the message.
 

@@ -18,7 +18,7 @@ from raycore.bvh.records import (
     check_primitive_count,
     records_from_bounds,
 )
-from raycore.bvh.simd import LANES
+from raycore.bvh.simd import lanes_for
 from raycore.mesh import Mesh
 
 
@@ -61,7 +61,7 @@ def unpacked(mesh):
     refs = mesh.bvh.refs.copy()
     firsts = refs[:, REFS:REFS + WIDTH]
     leaf = refs[:, COUNTS:COUNTS + WIDTH] > 0
-    firsts[leaf] = position[LANES * firsts[leaf]]
+    firsts[leaf] = position[lanes_for(mesh.leaf_blocks.dtype) * firsts[leaf]]
     return replace(mesh.bvh, nodes=refs.view(np.float32), refs=refs,
                    order=mesh.slot_face[real].astype(np.int64))
 
@@ -231,8 +231,9 @@ def test_mesh_leaves_hold_each_triangle_as_the_scene_stores_it(dtype):
     check_leaves(unpacked(mesh), corners.min(axis=1), corners.max(axis=1), params.max_leaf_size)
     assert mesh.leaf_blocks.dtype == np.dtype(dtype)
     slots = np.flatnonzero(mesh.slot_face >= 0)
-    # block b holds value j (a.x, a.y, ..., c.z) of lane l at [b, j * LANES + l]
-    stored_corners = mesh.leaf_blocks.reshape(-1, 9, LANES)[slots // LANES, :, slots % LANES]
+    # block b holds value j (a.x, a.y, ..., c.z) of lane l at [b, j * lanes + l]
+    lanes = lanes_for(dtype)
+    stored_corners = mesh.leaf_blocks.reshape(-1, 9, lanes)[slots // lanes, :, slots % lanes]
     assert np.array_equal(stored_corners, corners[mesh.slot_face[slots]].reshape(-1, 9))
     assert np.array_equal(mesh.bvh.lo, stored.min(axis=0))
     lo, hi = mesh.bounds

@@ -1,6 +1,6 @@
-"""The vector leaf test (four triangles at once) against the scalar watertight test.
+"""The vector leaf test (a block's triangles at once) against the scalar watertight test.
 
-``watertight4`` promises, lane by lane, the scalar test's t, u and v bit for bit, and to hand
+``watertight_block`` promises, lane by lane, the scalar test's t, u and v bit for bit, and to hand
 every lane whose edge function rounds to 0 back to the scalar test.  The cases are chosen where
 that promise is easiest to break: rays through shared edges and vertices (edge functions of
 exactly 0), hits at the ends of [tmin, tmax], axis-aligned rays (ties in the axis permutation),
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from raycore.bvh.simd import BLOCK, LANES, watertight4
+from raycore.bvh.simd import block_lanes, block_width, lanes_for, watertight_block
 from raycore.primitives.triangle import watertight, watertight_setup
 
 
@@ -20,25 +20,25 @@ from raycore.primitives.triangle import watertight, watertight_setup
 def _both_tests(blocks, origins, directions, tmin, tmax):
     """For every ray and block: (hit bits, scalar-fallback bits) of the vector test, its t, u,
     v, and the scalar test's t, u, v, per lane."""
-    rays, count = len(origins), len(blocks)
+    rays, count, width = len(origins), len(blocks), block_lanes(blocks)
     bits = np.zeros((rays, count, 2), np.int64)
-    vector = np.full((rays, count, 3, LANES), np.nan, blocks.dtype)
-    scalar = np.full((rays, count, 3, LANES), np.nan, blocks.dtype)
-    lanes = np.empty(3 * LANES, blocks.dtype)
+    vector = np.full((rays, count, 3, width), np.nan, blocks.dtype)
+    scalar = np.full((rays, count, 3, width), np.nan, blocks.dtype)
+    lanes = np.empty(3 * width, blocks.dtype)
     for r in range(rays):
         ox, oy, oz = origins[r]
         dx, dy, dz = directions[r]
         kx, ky, kz, sx, sy, sz = watertight_setup(dx, dy, dz)
         for b in range(count):
-            found = watertight4(blocks, b, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin[r], tmax[r],
-                                lanes)
-            bits[r, b, 0] = found & (2**LANES - 1)
-            bits[r, b, 1] = found >> LANES
-            for lane in range(LANES):
+            found = watertight_block(blocks, b, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin[r],
+                                     tmax[r], lanes)
+            bits[r, b, 0] = found & ((1 << width) - 1)
+            bits[r, b, 1] = found >> width
+            for lane in range(width):
                 if found >> lane & 1:
                     for k in range(3):
-                        vector[r, b, k, lane] = lanes[k * LANES + lane]
-                v = blocks[b, lane::LANES]
+                        vector[r, b, k, lane] = lanes[k * width + lane]
+                v = blocks[b, lane::width]
                 t, u, w = watertight(ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin[r], tmax[r], v[0],
                                      v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8])
                 scalar[r, b, 0, lane], scalar[r, b, 1, lane], scalar[r, b, 2, lane] = t, u, w
@@ -46,12 +46,13 @@ def _both_tests(blocks, origins, directions, tmin, tmax):
 
 
 def _blocks(triangles, dtype):
-    """Triangles (T, 3, 3) packed four to a block as the leaves hold them (padding NaN)."""
-    count = -(-len(triangles) // LANES) * LANES
+    """Triangles (T, 3, 3) packed into blocks as the leaves hold them (padding NaN)."""
+    lanes = lanes_for(dtype)
+    count = -(-len(triangles) // lanes) * lanes
     padded = np.full((count, 9), np.nan)
     padded[:len(triangles)] = triangles.reshape(-1, 9)
     return np.ascontiguousarray(
-        padded.reshape(-1, LANES, 9).transpose(0, 2, 1).reshape(-1, BLOCK), dtype)
+        padded.reshape(-1, lanes, 9).transpose(0, 2, 1).reshape(-1, block_width(dtype)), dtype)
 
 
 def _fan(dtype):
@@ -98,7 +99,7 @@ def test_vector_lanes_equal_the_scalar_test_bit_for_bit(dtype):
     blocks = _fan(dtype)
     bits, vector, scalar = _both_tests(blocks, *_rays(dtype))
     hit, fallback = bits[..., 0], bits[..., 1]
-    lane_bits = 1 << np.arange(LANES)
+    lane_bits = 1 << np.arange(lanes_for(dtype))
     hit_lanes = (hit[..., None] & lane_bits) > 0
     fallback_lanes = (fallback[..., None] & lane_bits) > 0
     scalar_hit = np.isfinite(scalar[:, :, 0, :])
