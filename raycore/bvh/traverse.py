@@ -215,7 +215,9 @@ def _descend(nodes, refs, row, row_base, box, lo, hi, stack, stack_t, top, entry
 
 @njit(cache=True, inline="always")
 def _pop(stack, stack_t, top, tmax):
-    """Pop the next pending node whose entry distance can still beat ``tmax``; -1 when done."""
+    """Pop the next pending node whose entry distance can still beat ``tmax`` (the box test's
+    far bound, :func:`_bounds32`: a computed entry distance may exceed the exact one by a
+    factor 1 + γ(6)); -1 when done."""
     while top > 0:
         top -= 1
         if stack_t[top] <= tmax:
@@ -331,7 +333,7 @@ def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj
         if next_row >= 0:
             row = next_row
         else:
-            row, top = _pop(stack, stack_t, top, best_t)
+            row, top = _pop(stack, stack_t, top, hi)
     return best_t, best_slot, best_u, best_v, found
 
 
@@ -439,13 +441,13 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
                     if mode == ANY:
                         return best_t, best_obj, best_prim, best_u, best_v, found
         in_top = True
+        lo, hi = _bounds32(tmin, best_t)
         if next_row >= 0:
             row = next_row
         else:
-            row, top = _pop(stack, stack_t, top, best_t)
+            row, top = _pop(stack, stack_t, top, hi)
             if row < 0:
                 break
-        lo, hi = _bounds32(tmin, best_t)
         next_row, top, leaves = _descend(top_nodes, scene.top_refs, row, 0, box, lo, hi, stack,
                                          stack_t, top, entry, leaf_first, leaf_count,
                                          mode == CLOSEST)
