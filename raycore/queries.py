@@ -66,9 +66,13 @@ LIST_ROOM = 2
 #: 0.90-0.98 / 0.95-0.96.  ``intersect_all``, whose lists are put back too: 1.15-1.40 on suzanne,
 #: teapot, fandisk and stanford-bunny, 0.91 on nefertiti-1.6M.  ``contains`` is grouped on every
 #: tree: its rays share one direction, so grouping their origins makes them coherent (0.85-0.97
-#: on the same small meshes, 0.78 on nefertiti-1.6M).
+#: on the same small meshes, 0.78 on nefertiti-1.6M).  With eight-lane leaf blocks the traversal
+#: got faster and the float64 trees of 6.1 and 8.7 MiB lost too (1.06 / 1.06-1.14 / 1.01), while
+#: stanford-bunny subdivided once (278k triangles, 13.7 MiB in float32, 25 in float64) gained
+#: (0.84-0.94 / 0.90-0.98 / 0.84-0.88), as did nefertiti subdivided once (400k, 0.90-0.92 /
+#: 0.85-0.86 / 0.79): hence 12 MiB, between the two.
 GROUP_FROM = 65536
-GROUP_TREE_BYTES = 6 << 20
+GROUP_TREE_BYTES = 12 << 20
 PARTS_PER_THREAD = 2
 
 
