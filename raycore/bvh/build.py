@@ -68,7 +68,8 @@ class BuildParams:
         c_int).
     block_size : int
         Primitives a leaf tests at once: a leaf of n primitives costs ceil(n / block_size)
-        tests (a mesh's leaves are blocks of four triangles, :mod:`raycore.bvh.leaves`).
+        tests (a mesh's leaves are blocks of eight float32 or four float64 triangles,
+        :mod:`raycore.bvh.leaves`).
     """
 
     bins: int = 16
