@@ -16,6 +16,7 @@ import numpy as np
 from numba import get_num_threads, get_thread_id, njit, parallel_chunksize, prange
 
 from raycore._memory import empty_aligned
+from raycore.bvh.leaves import slot_value
 from raycore.bvh.record import arrays_of
 from raycore.bvh.traverse import (
     ALL,
@@ -27,7 +28,6 @@ from raycore.bvh.traverse import (
     MESH,
     PARITY,
     new_scratch,
-    slot_value,
     trace_range,
 )
 from raycore.primitives.analytic import analytic_surface

@@ -20,6 +20,20 @@ from raycore.bvh.layout import COUNTS, REFS, WIDTH
 from raycore.bvh.simd import block_lanes, block_width, lanes_for
 
 
+@njit(cache=True, inline="always")
+def slot_index(blocks, slot, value):
+    """Where value ``value`` (0..8: a.x, a.y, a.z, b.x, ..., c.z) of the triangle in ``slot``
+    lies in ``blocks``: (row, column)."""
+    lanes = block_lanes(blocks)
+    return slot // lanes, value * lanes + slot % lanes
+
+
+@njit(cache=True, inline="always")
+def slot_value(blocks, slot, value):
+    """Value ``value`` (0..8: a.x, a.y, a.z, b.x, ..., c.z) of the triangle in ``slot``."""
+    return blocks[slot_index(blocks, slot, value)]
+
+
 @njit(cache=True)
 def _fill_blocks(vertices, faces, order, leaf_first, leaf_count, leaf_block, blocks, slot_face):
     lanes = block_lanes(blocks)
@@ -27,24 +41,22 @@ def _fill_blocks(vertices, faces, order, leaf_first, leaf_count, leaf_block, blo
         for k in range(leaf_count[leaf]):
             face = order[leaf_first[leaf] + k]
             slot = lanes * leaf_block[leaf] + k
-            block = slot // lanes
-            lane = slot % lanes
             slot_face[slot] = face
             for vertex in range(3):
                 for axis in range(3):
-                    blocks[block, (3 * vertex + axis) * lanes + lane] = vertices[
+                    blocks[slot_index(blocks, slot, 3 * vertex + axis)] = vertices[
                         faces[face, vertex], axis]
             # the edges' cross product as the triangle tests compute it, in the scene's precision
-            row = blocks[block]
-            ax, ay, az = row[lane], row[lanes + lane], row[2 * lanes + lane]
-            e1x, e1y, e1z = row[3 * lanes + lane] - ax, row[4 * lanes + lane] - ay, row[
-                5 * lanes + lane] - az
-            e2x, e2y, e2z = row[6 * lanes + lane] - ax, row[7 * lanes + lane] - ay, row[
-                8 * lanes + lane] - az
+            ax, ay, az = (slot_value(blocks, slot, 0), slot_value(blocks, slot, 1),
+                          slot_value(blocks, slot, 2))
+            e1x, e1y, e1z = (slot_value(blocks, slot, 3) - ax, slot_value(blocks, slot, 4) - ay,
+                             slot_value(blocks, slot, 5) - az)
+            e2x, e2y, e2z = (slot_value(blocks, slot, 6) - ax, slot_value(blocks, slot, 7) - ay,
+                             slot_value(blocks, slot, 8) - az)
             if (e1y * e2z - e1z * e2y == 0 and e1z * e2x - e1x * e2z == 0
                     and e1x * e2y - e1y * e2x == 0):
                 for j in range(9):
-                    row[j * lanes + lane] = np.nan
+                    blocks[slot_index(blocks, slot, j)] = np.nan
 
 
 def pack_leaves(nodes, refs, order, vertices, faces, dtype):

@@ -26,6 +26,7 @@ from numba import njit
 from raycore._fp import gamma, like, unit_roundoff
 from raycore.bvh.build import MAX_DEPTH
 from raycore.bvh.layout import COUNTS, REFS, WIDTH
+from raycore.bvh.leaves import slot_value
 from raycore.bvh.simd import (
     MAX_LANES,
     block_lanes,
@@ -234,13 +235,6 @@ def _record(hit_t, hit_obj, hit_prim, found, t, obj, prim):
         hit_obj[found] = obj
         hit_prim[found] = prim
     return found + 1
-
-
-@njit(cache=True, inline="always")
-def slot_value(blocks, slot, value):
-    """Value ``value`` (0..8: a.x, a.y, a.z, b.x, ..., c.z) of the triangle in ``slot``."""
-    lanes = block_lanes(blocks)
-    return blocks[slot // lanes, value * lanes + slot % lanes]
 
 
 @njit(cache=True, forceinline=True, error_model="numpy", _nrt=False)
