@@ -257,8 +257,8 @@ def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj
     leaf_count = int_row[3 * WIDTH:4 * WIDTH]
     stack = int_row[4 * WIDTH + STACK_SIZE:INT_FIXED]
     entry = real_row[:WIDTH]
-    width = block_lanes(blocks)
-    lanes = real_row[WIDTH:WIDTH + 3 * MAX_LANES]
+    lanes = block_lanes(blocks)
+    lane_tuv = real_row[WIDTH:WIDTH + 3 * MAX_LANES]  # a block's t, u, v, lane by lane
     stack_t = real_row[WIDTH + 3 * MAX_LANES + STACK_SIZE:REAL_FIXED]
     box = _box_ray(ox, oy, oz, dx, dy, dz)
     # the watertight set-up waits for the first leaf: most rays that miss never reach one
@@ -281,21 +281,21 @@ def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj
         for leaf in range(leaves):
             first = block0 + leaf_first[leaf]
             count = leaf_count[leaf]
-            for block in range(first, first + (count + width - 1) // width):
+            for block in range(first, first + (count + lanes - 1) // lanes):
                 if test == WATERTIGHT:
                     bits = watertight_block(blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz,
-                                            tmin, best_t, lanes)
-                    exact = bits >> width
-                    hits = bits & ((1 << width) - 1)
+                                            tmin, best_t, lane_tuv)
+                    exact = bits >> lanes
+                    hits = bits & ((1 << lanes) - 1)
                 else:
                     # the leaf's triangles in this block, not its padding lanes
-                    exact = (1 << min(width, count - (block - first) * width)) - 1
+                    exact = (1 << min(lanes, count - (block - first) * lanes)) - 1
                     hits = 0
                 # lanes the vector test could not settle (or a test without one): scalar tests
                 while exact:
                     lane = lowest_set_bit(exact)
                     exact &= exact - 1
-                    slot = width * block + lane
+                    slot = lanes * block + lane
                     t, u, w = triangle_hit(
                         test, ox, oy, oz, dx, dy, dz, kx, ky, kz, sx, sy, sz, tmin, best_t,
                         slot_value(blocks, slot, 0), slot_value(blocks, slot, 1),
@@ -304,24 +304,24 @@ def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj
                         slot_value(blocks, slot, 6), slot_value(blocks, slot, 7),
                         slot_value(blocks, slot, 8))
                     if t < np.inf:
-                        lanes[lane] = t
-                        lanes[width + lane] = u
-                        lanes[2 * width + lane] = w
+                        lane_tuv[lane] = t
+                        lane_tuv[lanes + lane] = u
+                        lane_tuv[2 * lanes + lane] = w
                         hits |= 1 << lane
                 while hits:
                     lane = lowest_set_bit(hits)
                     hits &= hits - 1
-                    t = lanes[lane]
+                    t = lane_tuv[lane]
                     if mode >= COUNT:
                         found = _record(hit_t, hit_obj, hit_prim, found, t, obj,
-                                        width * block + lane)
+                                        lanes * block + lane)
                         continue
                     if t <= best_t:
                         best_t = t
                         lo, hi = _bounds32(tmin, best_t)
-                        best_slot = width * block + lane
-                        best_u = lanes[width + lane]
-                        best_v = lanes[2 * width + lane]
+                        best_slot = lanes * block + lane
+                        best_u = lane_tuv[lanes + lane]
+                        best_v = lane_tuv[2 * lanes + lane]
                         if mode == ANY:
                             return best_t, best_slot, best_u, best_v, found
         if next_row >= 0:
