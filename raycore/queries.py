@@ -11,6 +11,7 @@ Python threads may query at once, and each call numbers its worker threads from 
 """
 
 import threading
+from functools import partial
 
 import numpy as np
 from numba import get_num_threads, get_thread_id, njit, parallel_chunksize, prange
@@ -24,9 +25,11 @@ from raycore.bvh.traverse import (
     CLOSEST,
     COUNT,
     HIT_CAPACITY,
+    INT_FIXED,
     LIST,
     MESH,
     PARITY,
+    REAL_FIXED,
     new_scratch,
     trace_range,
 )
@@ -116,43 +119,47 @@ def _trace_here(record, mode, test, sphere_method, origins, directions, tmin, tm
 
 @njit(cache=True)
 def _hits_here(record, mode, test, sphere_method, origins, directions, tmin, tmax, out_t, out_obj,
-               out_prim, out_hit, int_scratch, real_scratch):
-    """:func:`_trace_here` for closest hits without surface fields (CLOSEST) and any hits
-    (ANY): fewer arguments to pass (through Numba's dispatcher 22 of them cost 1.5 us and 14
-    cost 0.9; called directly, as :func:`_call` does, each still costs its unboxing)."""
+               out_prim, out_hit):
+    """:func:`_trace_here` for batches below SERIAL_BELOW of closest hits without surface fields
+    (CLOSEST) and of any hits (ANY), which :func:`closest_hits` and :func:`any_hits` call
+    directly: the fixed cost of a call is their speed (one ray: 3 us).  It takes fewer arguments
+    (each costs its unboxing, even called as :func:`_compiled` does) and allocates its one row of
+    scratch itself: 0.1 us, against 0.35 for looking up and passing the calling thread's rows."""
     no_reals = out_t[:0]
     no_ints = out_obj[:0]
+    int_scratch = np.empty(INT_FIXED + 2 * HIT_CAPACITY, np.int64)
+    real_scratch = np.empty(REAL_FIXED + HIT_CAPACITY, origins.dtype)
     return trace_range(arrays_of(record), mode, test, sphere_method, origins, directions, tmin,
                        tmax, np.int64(0), len(origins), out_t, out_obj, out_prim, out_hit,
                        no_reals, no_reals, no_ints, no_ints, no_reals, no_ints, no_ints,
-                       int_scratch[0], real_scratch[0], np.int64(HIT_CAPACITY))
+                       int_scratch, real_scratch, np.int64(HIT_CAPACITY))
 
 
-def _call(entry, record, *arguments):
-    """``entry(record, *arguments)`` through its compiled code, without Numba's dispatch.
+def _compiled(entry, record):
+    """``entry``'s compiled code for calls with ``record``, to be called as ``entry`` is, without
+    Numba's dispatch.
 
     Numba's dispatcher types every argument on every call to find the compiled version: 0.7 of
     the 1.6 us that a one-ray query spent in its compiled entry.  Here every argument but the
     record has one type per precision (rays and bounds as :func:`raycore.rays.ray_arrays`
     gives them, C-contiguous, aligned and writable; outputs and scratch made in this module;
-    integers), so the record's type, which also varies with what a scene holds (read-only
-    arrays of a memory-mapped file), names the version.  Its first call goes through the
-    dispatcher, which compiles or loads it; later ones call its entry point (the compiled
-    wrapper the dispatcher itself would call), or the dispatcher where Numba has none.
+    integers), so the record, whose type also varies with what a scene holds (read-only arrays
+    of a memory-mapped file), names the version: it keeps the entry points it was called
+    through (``record.entry_points``).  Its first call of an entry goes through the dispatcher,
+    which compiles or loads it; later ones call its entry point (the compiled wrapper the
+    dispatcher itself would call), or the dispatcher where Numba has none.  The function is
+    returned, not called, so that a query passes its arguments once (0.15 us of a one-ray call).
     """
-    key = (entry, id(record._type))
-    compiled = _compiled.get(key)
-    if compiled is not None:
-        return compiled[1](record, *arguments)
+    run = record.entry_points.get(entry)
+    return run if run is not None else partial(_first_call, entry)
+
+
+def _first_call(entry, record, *arguments):
+    """Call ``entry`` through its dispatcher and keep its entry point for ``record``'s type."""
     answer = entry(record, *arguments)
     signature = tuple(map(entry.typeof_pyval, (record, *arguments)))
-    # the type is kept with its entry, so that its id is not reused while cached
-    _compiled[key] = (record._type,
-                      getattr(entry.overloads.get(signature), "entry_point", entry))
+    record.entry_points[entry] = getattr(entry.overloads.get(signature), "entry_point", entry)
     return answer
-
-
-_compiled = {}
 
 
 class _Scratch(threading.local):
@@ -174,7 +181,7 @@ _scratch = _Scratch()
 _EMPTY = {np.dtype(np.float32): np.empty(0, np.float32),
           np.dtype(np.float64): np.empty(0, np.float64)}
 _NO_INTS = np.empty(0, np.int64)
-_NO_FLAGS = np.empty(0, np.uint8)
+_NO_FLAGS = np.empty(0, np.bool_)
 _NO_OFFSETS = np.zeros(1, np.int64)
 
 
@@ -212,16 +219,13 @@ def trace(scene, mode, rays, test, sphere_method, *, out_t=None, out_obj=None, o
     # get_num_threads costs 0.8 us: asked only for a parallel call
     threads = 1 if serial else get_num_threads()
     int_scratch, real_scratch = _scratch.get(origins.dtype, capacity, threads)
-    if serial and mode <= ANY and barycentrics is None:
-        return _call(_hits_here, scene, mode, test, sphere_method, origins, directions, tmin,
-                     tmax, out_t, out_obj, out_prim, out_hit, int_scratch, real_scratch)
     u, v, slot = (empty, empty, _NO_INTS) if barycentrics is None else barycentrics
     hits_t, hits_obj, hits_prim = (empty, _NO_INTS, _NO_INTS) if hits is None else hits
     arguments = (scene, mode, test, sphere_method, origins, directions, tmin, tmax, out_t,
                  out_obj, out_prim, out_hit, u, v, slot, offsets, hits_t, hits_obj, hits_prim,
                  int_scratch, real_scratch, capacity)
     if serial:
-        return _call(_trace_here, *arguments)
+        return _compiled(_trace_here, arguments[0])(*arguments)
     grouped = grouping(scene, rays, threads, mode) if group else None
     if grouped is not None:
         return _trace_grouped(*grouped, arguments, threads)
@@ -280,7 +284,7 @@ def _trace_in_chunks(arguments, threads):
     # cheaper than a hit), and static halves would leave one core idle
     size = min(CHUNK, max(MIN_CHUNK, len(arguments[4]) // (ITEMS_PER_THREAD * threads)))
     with parallel_chunksize(1):
-        return _call(_trace_in_parallel, *arguments, size)
+        return _compiled(_trace_in_parallel, arguments[0])(*arguments, size)
 
 
 #: Where ``trace``'s arguments hold the rays, and the per-ray outputs (out_t .. out_slot).
@@ -322,17 +326,26 @@ def closest_hits(scene, rays, test, sphere_method, barycentrics):
     prim = np.empty(n, np.int64)
     surface = (np.empty(n, dtype), np.empty(n, dtype), np.empty(n, np.int64)) \
         if barycentrics else None
-    first_bad = trace(scene, CLOSEST, rays, test, sphere_method, out_t=t, out_obj=obj,
-                      out_prim=prim, barycentrics=surface)
+    if n < SERIAL_BELOW and not barycentrics:
+        first_bad = _compiled(_hits_here, scene)(scene, CLOSEST, test, sphere_method, *rays, t,
+                                                 obj, prim, _NO_FLAGS)
+    else:
+        first_bad = trace(scene, CLOSEST, rays, test, sphere_method, out_t=t, out_obj=obj,
+                          out_prim=prim, barycentrics=surface)
     return first_bad, t, obj, prim, surface
 
 
 def any_hits(scene, rays, test, sphere_method):
     """First refused ray (or N), and (N,) bool: whether each ray hits anything in [tmin, tmax],
     stopping at the first hit."""
-    hit = np.empty(len(rays[0]), np.uint8)
-    first_bad = trace(scene, ANY, rays, test, sphere_method, out_hit=hit)
-    return first_bad, hit.view(np.bool_)
+    n = len(rays[0])
+    hit = np.empty(n, np.bool_)
+    if n < SERIAL_BELOW:
+        first_bad = _compiled(_hits_here, scene)(scene, ANY, test, sphere_method, *rays,
+                                                 _EMPTY[rays[0].dtype], _NO_INTS, _NO_INTS, hit)
+    else:
+        first_bad = trace(scene, ANY, rays, test, sphere_method, out_hit=hit)
+    return first_bad, hit
 
 
 def crossing_counts(scene, rays, test, sphere_method, mode=COUNT, out_hit=None, group=True,
@@ -340,7 +353,7 @@ def crossing_counts(scene, rays, test, sphere_method, mode=COUNT, out_hit=None, 
     """First refused ray (or N), the (N,) int64 crossings of each ray (a shared edge or vertex
     crossed once counts once), and the hit-list capacity that held every ray's crossings.
 
-    With ``mode`` PARITY, ``out_hit`` ((N,) uint8) also receives whether each ray crosses some
+    With ``mode`` PARITY, ``out_hit`` ((N,) bool) also receives whether each ray crosses some
     closed object an odd number of times.  With ``listing``, ``(offsets, hits)`` as
     :func:`all_hits` makes them, the pass lists the crossings that fit there (mode LIST of
     :func:`raycore.bvh.traverse.trace_range`), in the order the rays are given: such a pass is
@@ -365,9 +378,9 @@ def crossing_counts(scene, rays, test, sphere_method, mode=COUNT, out_hit=None, 
 def odd_crossings(scene, rays, test, sphere_method):
     """First refused ray (or N), and (N,) bool: whether each ray crosses some closed object an
     odd number of times (it starts inside that object)."""
-    odd = np.empty(len(rays[0]), np.uint8)
+    odd = np.empty(len(rays[0]), np.bool_)
     first_bad, _, _ = crossing_counts(scene, rays, test, sphere_method, PARITY, odd)
-    return first_bad, odd.view(np.bool_)
+    return first_bad, odd
 
 
 def all_hits(scene, rays, test, sphere_method):

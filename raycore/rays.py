@@ -80,7 +80,7 @@ def _kernel_array(array, dtype):
     writable, aligned arrays only, since Numba compiles a kernel again for each argument that is
     read-only (a float32 warm-up compiled the traversal six times, not three, for read-only rays
     and bounds), and the queries call the compiled version for that one layout directly
-    (:func:`raycore.queries._call`)."""
+    (:func:`raycore.queries._compiled`)."""
     array = _converted(array, dtype)
     return array if array.flags.writeable and array.flags.aligned else array.copy()
 
@@ -166,12 +166,12 @@ def _as_bound(value, name, count, dtype):
     """A ray bound as a (1,) or (N,) array of ``dtype``, its shape checked; NaN is left for the
     compiled pass to find.  Scalars come back as shared (1,) arrays."""
     if type(value) in _PLAIN_NUMBERS:
-        key = (value, dtype.char)
-        array = _SCALAR_BOUNDS.get(key)
+        shared = _SCALAR_BOUNDS[dtype]
+        array = shared.get(value)
         if array is None:
             array = np.full(1, value, dtype)
-            if len(_SCALAR_BOUNDS) < 64:
-                _SCALAR_BOUNDS[key] = array
+            if len(shared) < 32:
+                shared[value] = array
         return array
     try:
         array = np.asarray(value, dtype=np.float64) if not isinstance(value, np.ndarray) \
@@ -185,7 +185,7 @@ def _as_bound(value, name, count, dtype):
     return _kernel_array(array, dtype)
 
 
-_SCALAR_BOUNDS = {}
+_SCALAR_BOUNDS = {np.dtype(np.float32): {}, np.dtype(np.float64): {}}
 _PLAIN_NUMBERS = (float, int)
 
 
@@ -224,9 +224,8 @@ def _ready(origins, directions, dtype):
     if origins.dtype is not dtype or directions.dtype is not dtype or len(shape) != 2 \
             or shape[1] != 3 or directions.shape != shape:
         return False
-    given, other = origins.flags, directions.flags
-    return (given.c_contiguous and given.writeable and given.aligned
-            and other.c_contiguous and other.writeable and other.aligned)
+    # carray: C-contiguous, aligned and writeable, in one flag (one flags object per array)
+    return origins.flags.carray and directions.flags.carray
 
 
 def refuse(origins, directions, tmin, tmax, dtype):

@@ -245,6 +245,7 @@ class Scene:
             _starts([len(m.bvh.nodes) for m in self._meshes]), _starts([len(b) for b in blocks]),
         )
         record.tree_bytes = top_nodes.nbytes + mesh_nodes.nbytes + all_blocks.nbytes
+        record.entry_points = {}
         self._record = record
 
     def _scene(self):
@@ -288,14 +289,6 @@ class Scene:
 
     # ------------------------------------------------------------------ queries
 
-    def _rays(self, origins, directions, tmin, tmax):
-        return ray_arrays(origins, directions, tmin, tmax, self._kernel_dtype)
-
-    def _checked(self, first_bad, rays, given):
-        """Raise the error for the first ray the compiled pass refused, if it refused one."""
-        if first_bad < len(rays[0]):
-            refuse(*given, self.dtype)
-
     def intersect(self, origins, directions, tmin=0.0, tmax=np.inf, *,
                   triangle_test="watertight", sphere_method="precise", fields=()):
         """Closest hit of each ray.
@@ -317,10 +310,11 @@ class Scene:
         fields = check_fields(fields) if fields else ()
         test = triangle_test_code(triangle_test)
         method = analytic.sphere_method_code(sphere_method)
-        rays = self._rays(origins, directions, tmin, tmax)
+        rays = ray_arrays(origins, directions, tmin, tmax, self._kernel_dtype)
         first_bad, t, obj, prim, surface = queries.closest_hits(
             self._scene(), rays, test, method, barycentrics=bool(fields))
-        self._checked(first_bad, rays, (origins, directions, tmin, tmax))
+        if first_bad < len(rays[0]):  # the compiled pass refused a ray: say what is wrong
+            refuse(origins, directions, tmin, tmax, self.dtype)
         if not fields:
             return Hits(t, obj, prim)
         u, v, slot = surface
@@ -349,9 +343,10 @@ class Scene:
         """(N,) bool: whether anything lies on each ray within [tmin, tmax] (stops at the first)."""
         test = triangle_test_code(triangle_test)
         method = analytic.sphere_method_code(sphere_method)
-        rays = self._rays(origins, directions, tmin, tmax)
+        rays = ray_arrays(origins, directions, tmin, tmax, self._kernel_dtype)
         first_bad, hit = queries.any_hits(self._scene(), rays, test, method)
-        self._checked(first_bad, rays, (origins, directions, tmin, tmax))
+        if first_bad < len(rays[0]):  # the compiled pass refused a ray: say what is wrong
+            refuse(origins, directions, tmin, tmax, self.dtype)
         return hit
 
     def intersect_all(self, origins, directions, tmin=0.0, tmax=np.inf, *,
@@ -367,9 +362,10 @@ class Scene:
         """
         test = triangle_test_code(triangle_test)
         method = analytic.sphere_method_code(sphere_method)
-        rays = self._rays(origins, directions, tmin, tmax)
+        rays = ray_arrays(origins, directions, tmin, tmax, self._kernel_dtype)
         first_bad, counts, t, obj, prim = queries.all_hits(self._scene(), rays, test, method)
-        self._checked(first_bad, rays, (origins, directions, tmin, tmax))
+        if first_bad < len(rays[0]):  # the compiled pass refused a ray: say what is wrong
+            refuse(origins, directions, tmin, tmax, self.dtype)
         ray_index = np.repeat(np.arange(len(counts), dtype=np.int64), counts)
         return AllHits(ray_index=ray_index, t=t, geom_id=obj, prim_id=prim, counts=counts)
 
@@ -379,9 +375,10 @@ class Scene:
         :meth:`intersect_all` lists them, without listing them."""
         test = triangle_test_code(triangle_test)
         method = analytic.sphere_method_code(sphere_method)
-        rays = self._rays(origins, directions, tmin, tmax)
+        rays = ray_arrays(origins, directions, tmin, tmax, self._kernel_dtype)
         first_bad, counts, _ = queries.crossing_counts(self._scene(), rays, test, method)
-        self._checked(first_bad, rays, (origins, directions, tmin, tmax))
+        if first_bad < len(rays[0]):  # the compiled pass refused a ray: say what is wrong
+            refuse(origins, directions, tmin, tmax, self.dtype)
         return counts
 
     def contains(self, points):
@@ -397,7 +394,7 @@ class Scene:
         directions = np.empty_like(points)
         for direction in _CONTAINS_DIRECTIONS:
             directions[:] = direction
-            rays = self._rays(points, directions, 0.0, np.inf)
+            rays = ray_arrays(points, directions, 0.0, np.inf, self._kernel_dtype)
             _, odd = queries.odd_crossings(scene, rays, WATERTIGHT, sphere.PRECISE)
             votes += odd
         return votes >= 2

@@ -37,9 +37,10 @@ class SceneRecordType(types.StructRef):
 class SceneRecord(structref.StructRefProxy):
     """The arrays of a built scene, as one argument for compiled code (fields: :data:`FIELDS`).
 
-    Python code also reads ``tree_bytes``, set by the scene that packs the record: the bytes of
-    the wide rows and leaf blocks that traversal reads (a field read from Python would compile
-    a getter).
+    Python code also reads two attributes, set by the scene that packs the record (a field read
+    from Python would compile a getter): ``tree_bytes``, the bytes of the wide rows and leaf
+    blocks that traversal reads, and ``entry_points``, the compiled entries that queries called
+    with it (:func:`raycore.queries._compiled`).
     """
 
 

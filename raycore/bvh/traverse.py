@@ -575,8 +575,8 @@ def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tma
         CLOSEST: t (inf on a miss), object (-1 on a miss) and primitive id (face index, or 0 for
         an analytic shape; -1 on a miss).  COUNT, ALL, PARITY and LIST: ``out_obj`` receives
         each ray's crossing count, or minus the crossings found when the hit list was too short.
-    out_hit : ndarray of uint8, shape (N,) or (0,)
-        ANY: 1 where the ray hits something.  PARITY: 1 where it crosses a closed object an
+    out_hit : ndarray of bool, shape (N,) or (0,)
+        ANY: whether the ray hits something.  PARITY: whether it crosses a closed object an
         odd number of times.
     out_u, out_v, out_slot : ndarray, shape (N,) or (0,)
         CLOSEST, when not empty: barycentrics and the slot of mesh hits (surface fields).
