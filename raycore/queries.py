@@ -121,10 +121,11 @@ def _trace_here(record, mode, test, sphere_method, origins, directions, tmin, tm
 def _hits_here(record, mode, test, sphere_method, origins, directions, tmin, tmax, out_t, out_obj,
                out_prim, out_hit):
     """:func:`_trace_here` for batches below SERIAL_BELOW of closest hits without surface fields
-    (CLOSEST) and of any hits (ANY), which :func:`closest_hits` and :func:`any_hits` call
-    directly: the fixed cost of a call is their speed (one ray: 3 us).  It takes fewer arguments
-    (each costs its unboxing, even called as :func:`_compiled` does) and allocates its one row of
-    scratch itself: 0.1 us, against 0.35 for looking up and passing the calling thread's rows."""
+    (CLOSEST), any hits (ANY), counts (COUNT, PARITY: room for HIT_CAPACITY crossings a ray),
+    which the queries call directly: the fixed cost of a call is their speed (one ray: 3 us).
+    It takes fewer arguments (each costs its unboxing, even called as :func:`_compiled` does)
+    and allocates its one row of scratch itself: 0.1 us, against 0.35 for looking up and passing
+    the calling thread's rows."""
     no_reals = out_t[:0]
     no_ints = out_obj[:0]
     int_scratch = np.empty(INT_FIXED + 2 * HIT_CAPACITY, np.int64)
@@ -364,10 +365,16 @@ def crossing_counts(scene, rays, test, sphere_method, mode=COUNT, out_hit=None, 
         # LIST writes offsets[i] for every ray: never with the shared one-element default
         mode, (offsets, hits), group = LIST, listing, False
     capacity = HIT_CAPACITY
+    serial = listing is None and len(counts) < SERIAL_BELOW
     while True:
-        first_bad = trace(scene, mode, rays, test, sphere_method, out_obj=counts,
-                          out_hit=out_hit, offsets=offsets, hits=hits, capacity=capacity,
-                          group=group)
+        if serial and capacity == HIT_CAPACITY:
+            first_bad = _compiled(_hits_here, scene)(
+                scene, mode, test, sphere_method, *rays, _EMPTY[rays[0].dtype], counts, _NO_INTS,
+                _NO_FLAGS if out_hit is None else out_hit)
+        else:
+            first_bad = trace(scene, mode, rays, test, sphere_method, out_obj=counts,
+                              out_hit=out_hit, offsets=offsets, hits=hits, capacity=capacity,
+                              group=group)
         most = -int(counts.min()) if len(counts) else 0
         if first_bad < len(counts) or most <= capacity:
             return first_bad, counts, capacity
