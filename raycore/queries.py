@@ -137,28 +137,29 @@ def _hits_here(record, mode, test, sphere_method, origins, directions, tmin, tma
 
 
 def _compiled(entry, record):
-    """``entry``'s compiled code for calls with ``record``, to be called as ``entry`` is, without
-    Numba's dispatch.
+    """``entry``'s compiled code for a query's calls about ``record``, to be called as ``entry``
+    is, without Numba's dispatch.
 
     Numba's dispatcher types every argument on every call to find the compiled version: 0.7 of
     the 1.6 us that a one-ray query spent in its compiled entry.  Here every argument but the
     record has one type per precision (rays and bounds as :func:`raycore.rays.ray_arrays`
     gives them, C-contiguous, aligned and writable; outputs and scratch made in this module;
-    integers), so the record, whose type also varies with what a scene holds (read-only arrays
-    of a memory-mapped file), names the version: it keeps the entry points it was called
-    through (``record.entry_points``).  Its first call of an entry goes through the dispatcher,
-    which compiles or loads it; later ones call its entry point (the compiled wrapper the
-    dispatcher itself would call), or the dispatcher where Numba has none.  The function is
-    returned, not called, so that a query passes its arguments once (0.15 us of a one-ray call).
+    integers), so the record, whose type fixes the precision and also varies with what a scene
+    holds (read-only arrays of a memory-mapped file), names the version: it keeps the entry
+    points that queries about it called (``record.entry_points``).  The first call of an entry
+    goes through the dispatcher, which compiles or loads it; later ones call its entry point
+    (the compiled wrapper the dispatcher itself would call), or the dispatcher where Numba has
+    none.  The function is returned, not called, so that a query passes its arguments once
+    (0.15 us of a one-ray call).
     """
     run = record.entry_points.get(entry)
-    return run if run is not None else partial(_first_call, entry)
+    return run if run is not None else partial(_first_call, record, entry)
 
 
-def _first_call(entry, record, *arguments):
-    """Call ``entry`` through its dispatcher and keep its entry point for ``record``'s type."""
-    answer = entry(record, *arguments)
-    signature = tuple(map(entry.typeof_pyval, (record, *arguments)))
+def _first_call(record, entry, *arguments):
+    """Call ``entry`` through its dispatcher and keep its entry point in ``record``."""
+    answer = entry(*arguments)
+    signature = tuple(map(entry.typeof_pyval, arguments))
     record.entry_points[entry] = getattr(entry.overloads.get(signature), "entry_point", entry)
     return answer
 
@@ -421,14 +422,13 @@ def all_hits(scene, rays, test, sphere_method):
     if first_bad < n:
         return first_bad, counts, None, None, None
     offsets = np.zeros(n + 1, np.int64)
-    np.cumsum(counts, out=offsets[1:])
+    counts.cumsum(out=offsets[1:])
     # where each traced ray's crossings go in the batch's order
     places = offsets[order] if len(order) else offsets[:-1]
     total = int(offsets[-1])
     hits = (np.empty(total, rays[0].dtype), np.empty(total, np.int64), np.empty(total, np.int64))
-    _move_lists(listed_at, traced_counts, places, *listed, *hits)
-    again = np.flatnonzero(listed_at < 0)
-    if len(again):
+    if _compiled(_move_lists, scene)(listed_at, traced_counts, places, *listed, *hits):
+        again = np.flatnonzero(listed_at < 0)
         trace(scene, ALL, _gathered(traced, again), test, sphere_method,
               out_obj=np.empty(len(again), np.int64), offsets=places[again], hits=hits,
               capacity=capacity, group=False)
@@ -439,16 +439,20 @@ def all_hits(scene, rays, test, sphere_method):
 def _move_lists(listed_at, counts, places, listed_t, listed_obj, listed_prim, hits_t, hits_obj,
                 hits_prim):
     """Copy each ray's crossings from where :func:`all_hits`'s pass listed them
-    (``listed_at``; -1 where they did not fit) to their places in the answer."""
+    (``listed_at``; -1 where they did not fit) to their places in the answer, and count the
+    rays whose crossings did not fit."""
+    unlisted = 0
     for i in range(len(counts)):
         at = listed_at[i]
         if at < 0:
+            unlisted += 1
             continue
         to = places[i]
         for j in range(counts[i]):
             hits_t[to + j] = listed_t[at + j]
             hits_obj[to + j] = listed_obj[at + j]
             hits_prim[to + j] = listed_prim[at + j]
+    return unlisted
 
 
 def surface_fields(record, origins, directions, t, obj, slot, u, v, want_uv, want_normal,

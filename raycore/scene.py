@@ -366,7 +366,7 @@ class Scene:
         first_bad, counts, t, obj, prim = queries.all_hits(self._scene(), rays, test, method)
         if first_bad < len(rays[0]):  # the compiled pass refused a ray: say what is wrong
             refuse(origins, directions, tmin, tmax, self.dtype)
-        ray_index = np.repeat(np.arange(len(counts), dtype=np.int64), counts)
+        ray_index = np.arange(len(counts), dtype=np.int64).repeat(counts)
         return AllHits(ray_index=ray_index, t=t, geom_id=obj, prim_id=prim, counts=counts)
 
     def count(self, origins, directions, tmin=0.0, tmax=np.inf, *,
