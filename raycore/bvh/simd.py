@@ -96,11 +96,15 @@ def prefetch_row(typingctx, nodes, row):
     this made them 3-6 % faster (stanford-bunny, nefertiti; one and two threads), and coherent
     rays, which find their nodes in the cache, no slower.
     """
-    sig = types.void(nodes, row)
+    return types.void(nodes, row), _prefetch_codegen(range(0, 256, 64))
 
+
+def _prefetch_codegen(offsets):
+    """Codegen of a prefetch intrinsic ``(table, row)``: ask for the cache lines that hold the
+    bytes at ``offsets`` from the start of row ``row`` of the 2D array ``table``."""
     def codegen(context, builder, signature, args):
-        nodes_v, row_v = args
-        table = context.make_array(signature.args[0])(context, builder, nodes_v)
+        table_v, row_v = args
+        table = context.make_array(signature.args[0])(context, builder, table_v)
         start = cgutils.get_item_pointer(context, builder, signature.args[0], table,
                                          [row_v, ir.Constant(ir.IntType(64), 0)])
         byte = ir.IntType(8).as_pointer()
@@ -109,14 +113,14 @@ def prefetch_row(typingctx, nodes, row):
         function = cgutils.get_or_insert_function(
             builder.module, ir.FunctionType(ir.VoidType(), [byte, i32, i32, i32]),
             "llvm.prefetch.p0i8")
-        for line in range(4):
-            address = builder.gep(base, [ir.Constant(ir.IntType(64), 64 * line)])
+        for offset in offsets:
+            address = builder.gep(base, [ir.Constant(ir.IntType(64), offset)])
             # a read (0), to be kept in every cache level (3), of data (1)
             builder.call(function, [address, ir.Constant(i32, 0), ir.Constant(i32, 3),
                                     ir.Constant(i32, 1)])
         return context.get_dummy_value()
 
-    return sig, codegen
+    return codegen
 
 
 @intrinsic
@@ -150,6 +154,23 @@ def lanes_for(dtype):
 def block_width(dtype):
     """Values per leaf block (a row of a mesh's blocks) in precision ``dtype``."""
     return 9 * lanes_for(dtype)
+
+
+@intrinsic
+def prefetch_block(typingctx, blocks, block):
+    """Ask the memory for the cache lines of leaf block ``block`` (9 * VECTOR_BYTES bytes: five
+    lines, or six where a block does not start on a line), as :func:`prefetch_row` does for a
+    node.
+
+    The traversal asks for a leaf's blocks as soon as its node's test enters the leaf, and tests
+    them once the node's other children are pushed: the first load of a block had been the
+    traversal's longest wait (a tenth of a random ray's time on stanford-bunny).  Random rays
+    3-7 % faster in float32 and 1-9 % in float64 (closest, any hit, count; stanford-bunny and
+    nefertiti, one thread), up to 3 % on teapot and suzanne, cameras 0-2 %.
+    """
+    block_bytes = 9 * VECTOR_BYTES
+    return types.void(blocks, block), _prefetch_codegen((*range(0, block_bytes, 64),
+                                                         block_bytes - 1))
 
 
 @intrinsic

@@ -32,6 +32,7 @@ from raycore.bvh.simd import (
     block_lanes,
     enter8,
     lowest_set_bit,
+    prefetch_block,
     prefetch_row,
     watertight_block,
 )
@@ -169,12 +170,14 @@ def _box_ray(ox, oy, oz, dx, dy, dz):
 
 @njit(cache=True, inline="always", error_model="numpy")
 def _descend(nodes, refs, row, row_base, box, lo, hi, stack, stack_t, top, entry, leaf_first,
-             leaf_count, ordered):
+             leaf_count, ordered, blocks, block_base):
     """Test the ray (``box``, with float32 bounds ``lo``, ``hi`` from :func:`_bounds32`) against
     the children of wide node ``row``.
 
     Entered internal children go on the stack, and the last pushed is returned as the next row
-    (-1 if none); entered leaves are listed in ``leaf_first`` / ``leaf_count``.  When
+    (-1 if none); entered leaves are listed in ``leaf_first`` / ``leaf_count``, and a mesh's
+    leaf blocks (rows of ``blocks`` from ``block_base``; ``blocks`` is empty for the top-level
+    tree, whose leaves are objects) are prefetched as their leaves are entered.  When
     ``ordered`` (closest hit), the children are sorted so that the nearest is visited first;
     the other queries visit every entered child or stop at any hit, and skip the sort, as
     Embree's occlusion traversal does.
@@ -193,6 +196,11 @@ def _descend(nodes, refs, row, row_base, box, lo, hi, stack, stack_t, top, entry
         ref = refs[row, REFS + j]
         count = refs[row, COUNTS + j]
         if count > 0:
+            if len(blocks):  # a mesh's leaf: its blocks load while the others are visited
+                lanes = block_lanes(blocks)
+                first = block_base + ref
+                for block in range(first, first + (count + lanes - 1) // lanes):
+                    prefetch_block(blocks, block)
             leaf_first[leaves] = ref
             leaf_count[leaves] = count
             leaves += 1
@@ -274,7 +282,8 @@ def _trace_mesh(scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, tmax, mesh, obj
     row = root
     while row >= 0:
         next_row, top, leaves = _descend(nodes, refs, row, root, box, lo, hi, stack, stack_t,
-                                         top, entry, leaf_first, leaf_count, mode == CLOSEST)
+                                         top, entry, leaf_first, leaf_count, mode == CLOSEST,
+                                         blocks, block0)
         if leaves and not sheared:
             kx, ky, kz, sx, sy, sz = watertight_setup(dx, dy, dz)
             sheared = True
@@ -444,7 +453,7 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
                 break
         next_row, top, leaves = _descend(top_nodes, scene.top_refs, row, 0, box, lo, hi, stack,
                                          stack_t, top, entry, leaf_first, leaf_count,
-                                         mode == CLOSEST)
+                                         mode == CLOSEST, scene.blocks[:0], np.int64(0))
     return best_t, best_obj, best_prim, best_u, best_v, found
 
 
