@@ -385,6 +385,7 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
     stack = int_row[4 * WIDTH:4 * WIDTH + STACK_SIZE]
     entry = real_row[:WIDTH]
     stack_t = real_row[WIDTH + 3 * MAX_LANES:WIDTH + 3 * MAX_LANES + STACK_SIZE]
+    no_blocks = scene.blocks[:0]  # the top-level tree's leaves are objects, not leaf blocks
     best_t = tmax
     best_obj = -1
     best_prim = -1
@@ -453,7 +454,7 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
                 break
         next_row, top, leaves = _descend(top_nodes, scene.top_refs, row, 0, box, lo, hi, stack,
                                          stack_t, top, entry, leaf_first, leaf_count,
-                                         mode == CLOSEST, scene.blocks[:0], np.int64(0))
+                                         mode == CLOSEST, no_blocks, np.int64(0))
     return best_t, best_obj, best_prim, best_u, best_v, found
 
 
