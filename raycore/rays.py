@@ -209,23 +209,17 @@ def ray_arrays(origins, directions, tmin, tmax, dtype):
     ValueError
         Naming the argument whose shape or dtype is wrong.
     """
-    if not _ready(origins, directions, dtype):
+    # (N, 3) arrays of dtype, of one shape, C-contiguous, aligned and writable are taken as they
+    # are: checked here, not in a helper (0.05 us of a 3 us one-ray query); carray is
+    # C-contiguous, aligned and writeable in one flag
+    if not (type(origins) is np.ndarray and type(directions) is np.ndarray
+            and origins.dtype is dtype and directions.dtype is dtype
+            and origins.ndim == 2 and origins.shape[1] == 3 and directions.shape == origins.shape
+            and origins.flags.carray and directions.flags.carray):
         origins, directions, _ = _contiguous_rays(origins, directions, dtype)
     count = len(origins)
     return (origins, directions, _as_bound(tmin, "tmin", count, dtype),
             _as_bound(tmax, "tmax", count, dtype))
-
-
-def _ready(origins, directions, dtype):
-    # (N, 3) arrays of dtype, of one shape, C-contiguous, aligned and writable: taken as they are
-    if type(origins) is not np.ndarray or type(directions) is not np.ndarray:
-        return False
-    shape = origins.shape
-    if origins.dtype is not dtype or directions.dtype is not dtype or len(shape) != 2 \
-            or shape[1] != 3 or directions.shape != shape:
-        return False
-    # carray: C-contiguous, aligned and writeable, in one flag (one flags object per array)
-    return origins.flags.carray and directions.flags.carray
 
 
 def refuse(origins, directions, tmin, tmax, dtype):
