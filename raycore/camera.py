@@ -79,6 +79,15 @@ def _hash01(index, seed):
     return float(z >> np.uint64(11)) * (1.0 / 9007199254740992.0)  # 53 bits
 
 
+@njit(inline="always")
+def _unit(x, y, z):
+    """(x, y, z) scaled to unit length, by one division and three products rather than three
+    divisions: float64 division and square root bound the camera loops (1024x1024 rays, one
+    thread: 6.8 -> 4.1 ms); the direction moves by an ulp at most."""
+    scale = 1.0 / np.sqrt(x * x + y * y + z * z)
+    return x * scale, y * scale, z * scale
+
+
 @njit(cache=True, parallel=True, _nrt=False)
 def _sample_rays_kernel(center, right, up, x_scale, y_scale, width, height, samples, rows,
                         columns, seed, unit, constant, points, constants):
@@ -91,7 +100,6 @@ def _sample_rays_kernel(center, right, up, x_scale, y_scale, width, height, samp
     within 2 float64 epsilons of the divided ones (float32 rays came out the same in every size
     tried).  The strata are walked row by row (no integer division per ray) and the camera's
     vectors read once into scalars: 7.0 -> 5.2 ms for 512x512 pixels of 4 samples, alone.
-    Directions are made unit length as :func:`_plane_rays_kernel` makes them.
     """
     last = samples - columns * (rows - 1)
     to_x, to_y = 1.0 / width, 1.0 / height
@@ -114,8 +122,7 @@ def _sample_rays_kernel(center, right, up, x_scale, y_scale, width, height, samp
                     y = center_y + across * right_y + rise * up_y
                     z = center_z + across * right_z + rise * up_z
                     if unit:
-                        scale = 1.0 / np.sqrt(x * x + y * y + z * z)
-                        x, y, z = x * scale, y * scale, z * scale
+                        x, y, z = _unit(x, y, z)
                     points[ray, 0] = x
                     points[ray, 1] = y
                     points[ray, 2] = z
@@ -154,9 +161,6 @@ def _plane_rays(center, right, up, across, rise, constant, dtype, unit=False):
 
 @njit(cache=True, parallel=True)
 def _plane_rays_kernel(center, right, up, across, rise, unit, constant, points, constants):
-    # unit length by one division and three products, not three divisions: float64 division
-    # and square root bound this loop (1024x1024 rays, one thread: 6.8 -> 4.1 ms); the
-    # direction moves by an ulp at most
     width = len(across)
     for h in prange(len(rise)):
         for w in range(width):
@@ -164,8 +168,7 @@ def _plane_rays_kernel(center, right, up, across, rise, unit, constant, points, 
             y = center[1] + across[w] * right[1] + rise[h] * up[1]
             z = center[2] + across[w] * right[2] + rise[h] * up[2]
             if unit:
-                scale = 1.0 / np.sqrt(x * x + y * y + z * z)
-                x, y, z = x * scale, y * scale, z * scale
+                x, y, z = _unit(x, y, z)
             row = h * width + w
             points[row, 0] = x
             points[row, 1] = y

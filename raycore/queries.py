@@ -25,12 +25,11 @@ from raycore.bvh.traverse import (
     CLOSEST,
     COUNT,
     HIT_CAPACITY,
-    INT_FIXED,
     LIST,
     MESH,
     PARITY,
-    REAL_FIXED,
     new_scratch,
+    scratch_lengths,
     trace_range,
 )
 from raycore.primitives.analytic import analytic_surface
@@ -128,8 +127,9 @@ def _hits_here(record, mode, test, sphere_method, origins, directions, tmin, tma
     the calling thread's rows."""
     no_reals = out_t[:0]
     no_ints = out_obj[:0]
-    int_scratch = np.empty(INT_FIXED + 2 * HIT_CAPACITY, np.int64)
-    real_scratch = np.empty(REAL_FIXED + HIT_CAPACITY, origins.dtype)
+    ints, reals = scratch_lengths(HIT_CAPACITY)
+    int_scratch = np.empty(ints, np.int64)
+    real_scratch = np.empty(reals, origins.dtype)
     return trace_range(arrays_of(record), mode, test, sphere_method, origins, directions, tmin,
                        tmax, np.int64(0), len(origins), out_t, out_obj, out_prim, out_hit,
                        no_reals, no_reals, no_ints, no_ints, no_reals, no_ints, no_ints,

@@ -66,6 +66,13 @@ LINE = 64
 SCRATCH_GAP = 2 * LINE
 
 
+@njit(cache=True, inline="always")
+def scratch_lengths(capacity):
+    """Values in a thread's int and real scratch rows, for hit lists of ``capacity`` crossings:
+    (INT_FIXED + 2 * capacity, REAL_FIXED + capacity)."""
+    return INT_FIXED + 2 * capacity, REAL_FIXED + capacity
+
+
 def new_scratch(threads, dtype, capacity=HIT_CAPACITY):
     """Scratch memory for :func:`trace_range`: one row per thread, in the rays' precision.
 
@@ -82,8 +89,8 @@ def new_scratch(threads, dtype, capacity=HIT_CAPACITY):
     real_scratch : ndarray of dtype, shape (threads, >= REAL_FIXED + capacity)
         Rows start on cache lines.
     """
-    return (_line_rows(threads, INT_FIXED + 2 * capacity, np.int64),
-            _line_rows(threads, REAL_FIXED + capacity, dtype))
+    ints, reals = scratch_lengths(capacity)
+    return _line_rows(threads, ints, np.int64), _line_rows(threads, reals, dtype)
 
 
 def _line_rows(threads, count, dtype):
