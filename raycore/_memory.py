@@ -1,4 +1,4 @@
-"""Large output arrays that start on a huge page boundary.
+"""Arrays that start on a boundary: a huge page for large outputs, a cache line for tables.
 
 NumPy asks the kernel for huge (2 MiB) pages on arrays of 4 MiB and more (``madvise``), but only
 whole, aligned 2 MiB ranges can be huge pages: the rest of an array that starts anywhere else is
@@ -13,6 +13,8 @@ nothing measurable.
 import numpy as np
 
 HUGE_PAGE = 2 << 20
+#: Bytes of a cache line.
+LINE = 64
 
 
 def empty_aligned(shape, dtype):
@@ -36,3 +38,12 @@ def empty_aligned(shape, dtype):
     buffer = np.empty(-(-nbytes // HUGE_PAGE) * HUGE_PAGE + HUGE_PAGE, np.uint8)
     start = -buffer.ctypes.data % HUGE_PAGE
     return buffer[start:start + nbytes].view(dtype).reshape(shape)
+
+
+def empty_on_line(count, dtype):
+    """``np.empty(count, dtype)`` starting on a cache line (NumPy aligns to 16 bytes): rows of
+    a multiple of LINE bytes carved from it each take whole lines, none shared."""
+    dtype = np.dtype(dtype)
+    memory = np.empty(count + LINE // dtype.itemsize, dtype)
+    start = -memory.ctypes.data % LINE // dtype.itemsize
+    return memory[start:start + count]

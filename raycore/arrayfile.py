@@ -27,6 +27,8 @@ import tempfile
 import numpy as np
 from zlib_ng import zlib_ng
 
+from raycore._memory import empty_on_line
+
 MAGIC = b"\x89RAYCORE"
 #: Version of this layout and of what :mod:`raycore.scene_file` puts in it; a reader refuses a
 #: newer one.
@@ -155,8 +157,11 @@ def read(source, *, mmap=False):
         When the source is not such a file, is truncated, fails a checksum, or has a newer
         format version; the message says which.
     """
+    # read into memory that starts on a cache line, as a map's pages do, so that the arrays,
+    # on 64-byte boundaries of the file, start on lines too (raycore.bvh.leaves.empty_blocks)
     if isinstance(source, (bytes, bytearray, memoryview)):
-        raw = np.frombuffer(source, np.uint8).copy()  # aligned and writable
+        raw = empty_on_line(len(source), np.uint8)  # aligned and writable
+        raw[:] = np.frombuffer(source, np.uint8)
     elif mmap:
         size = os.path.getsize(source)
         if size < _PREFIX.size:
@@ -165,7 +170,7 @@ def read(source, *, mmap=False):
     else:
         with open(source, "rb") as file:
             size = os.fstat(file.fileno()).st_size
-            raw = np.empty(size, np.uint8)
+            raw = empty_on_line(size, np.uint8)
             if file.readinto(memoryview(raw)) != size:
                 raise ValueError(f"{source} changed while it was read")
     return _parse(raw)

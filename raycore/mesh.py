@@ -101,7 +101,6 @@ class Mesh:
         self._bounds = None
         self.bvh = None  # its leaves reference leaf_blocks once built
         self.leaf_blocks = None
-        self.slot_face = None
         self.build_seconds = 0.0
         self._built_for = None
 
@@ -132,28 +131,28 @@ class Mesh:
         vertices = self.vertices.astype(dtype, copy=False)
         lo, hi = (bound.astype(dtype).astype(np.float64) for bound in self.bounds)
         # let a rebuild's old tree go before the new one takes memory
-        self.bvh = self.leaf_blocks = self.slot_face = self._built_for = None
+        self.bvh = self.leaf_blocks = self._built_for = None
         # the SAH prices a leaf by the blocks its triangles fill
         bvh = build_bvh_from_records(triangle_records(vertices, self.faces), lo, hi,
                                      replace(params, block_size=lanes_for(dtype)))
-        self.leaf_blocks, self.slot_face = pack_leaves(bvh.nodes, bvh.refs, bvh.order, vertices,
-                                                       self.faces, dtype)
-        # slot_face replaces the leaf order, and the leaves now point at blocks
+        self.leaf_blocks = pack_leaves(bvh.nodes, bvh.refs, bvh.order, vertices, self.faces,
+                                       dtype)
+        # the blocks' face indices replace the leaf order, and the leaves now point at blocks
         self.bvh = replace(bvh, order=None)
         self.build_seconds = time.perf_counter() - start
         self._built_for = (dtype, params)
 
-    def restore(self, bvh, leaf_blocks, slot_face, dtype, params, build_seconds):
+    def restore(self, bvh, leaf_blocks, dtype, params, build_seconds):
         """Take a BVH built earlier for this mesh (by :meth:`build`, as
         :mod:`raycore.scene_file` stored it) in place of building one."""
-        self.bvh, self.leaf_blocks, self.slot_face = bvh, leaf_blocks, slot_face
+        self.bvh, self.leaf_blocks = bvh, leaf_blocks
         self.build_seconds = build_seconds
         self._built_for = (dtype, params)
 
     @property
     def nbytes(self):
-        """Bytes held for ray queries: the BVH, the leaf blocks and their face indices."""
-        return self.bvh.nbytes + self.leaf_blocks.nbytes + self.slot_face.nbytes
+        """Bytes held for ray queries: the BVH and the leaf blocks (with their face indices)."""
+        return self.bvh.nbytes + self.leaf_blocks.nbytes
 
 
 def validate_transform(transform):

@@ -11,10 +11,11 @@ import time
 import numpy as np
 
 from raycore import queries, scene_file
+from raycore._memory import empty_on_line
 from raycore.bvh.build import BuildParams
 from raycore.bvh.layout import NODE_WIDTH, build_bvh
+from raycore.bvh.leaves import empty_blocks
 from raycore.bvh.record import SceneRecord
-from raycore.bvh.simd import block_width
 from raycore.bvh.traverse import MESH
 from raycore.hits import AllHits, Hits, check_fields
 from raycore.integrations import open3d as _open3d
@@ -232,7 +233,7 @@ class Scene:
         top_nodes = self._top.nodes if len(self._top_slots) else empty_nodes
         mesh_nodes = _joined([m.bvh.nodes for m in self._meshes], empty_nodes)
         blocks = [m.leaf_blocks for m in self._meshes]
-        all_blocks = _joined(blocks, np.zeros((0, block_width(dtype)), dtype))
+        all_blocks = _joined(blocks, empty_blocks(0, dtype))
         record = SceneRecord(
             top_nodes, top_nodes.view(np.int32), self._top_slots, self._direct,
             np.array(self._kind, np.int64), np.array(self._param_row, np.int64),
@@ -241,7 +242,6 @@ class Scene:
             np.array(self._xforms, dtype=dtype).reshape(-1, 12),
             mesh_nodes, mesh_nodes.view(np.int32),
             all_blocks,
-            _joined([m.slot_face for m in self._meshes], np.zeros(0, np.int32)),
             _starts([len(m.bvh.nodes) for m in self._meshes]), _starts([len(b) for b in blocks]),
         )
         record.tree_bytes = top_nodes.nbytes + mesh_nodes.nbytes + all_blocks.nbytes
@@ -478,11 +478,15 @@ class Scene:
 
 
 def _joined(parts, empty):
-    """The arrays ``parts`` end to end; a lone one as it is (a copy of a large mesh's tree took
-    as much memory again as the tree, and 0.38 s at 6.4M triangles), ``empty`` for none."""
+    """The arrays ``parts`` end to end, starting on a cache line; a lone one as it is (a copy
+    of a large mesh's tree took as much memory again as the tree, and 0.38 s at 6.4M
+    triangles), ``empty`` for none."""
     if len(parts) == 1:
         return parts[0]
-    return np.concatenate(parts or [empty])
+    rows = sum(len(part) for part in parts)
+    row = empty.shape[1:]
+    joined = empty_on_line(rows * int(np.prod(row)), empty.dtype).reshape(rows, *row)
+    return np.concatenate(parts, out=joined) if parts else joined
 
 
 def _starts(sizes):

@@ -1,12 +1,12 @@
 """A built :class:`~raycore.Scene` as one file: what ``build()`` made, so that loading skips it.
 
 The file (:mod:`raycore.arrayfile`) holds the arrays the Scene and its meshes keep: each mesh's
-vertices, faces, wide BVH rows, leaf blocks and slot faces; the top-level tree; the object
-tables, analytic parameters and instance transforms; and, in its JSON header, the dtype, the
-build parameters and the trees' statistics.  Loading checks every index a kernel follows
-(object tables, tree references, leaf ranges, face indices) and rebuilds the kernels' record
-with the same code as ``build()`` (``Scene._assemble``).  Pickling a Scene goes through the same
-bytes, so that a pickle holds each array once.
+vertices, faces, wide BVH rows and leaf blocks (with their face indices); the top-level tree;
+the object tables, analytic parameters and instance transforms; and, in its JSON header, the
+dtype, the build parameters and the trees' statistics.  Loading checks every index a kernel
+follows (object tables, tree references, leaf ranges, face indices) and rebuilds the kernels'
+record with the same code as ``build()`` (``Scene._assemble``).  Pickling a Scene goes through
+the same bytes, so that a pickle holds each array once.
 """
 
 
@@ -15,14 +15,16 @@ import numpy as np
 from raycore import arrayfile
 from raycore.bvh.build import MAX_DEPTH
 from raycore.bvh.layout import BVH, NODE_WIDTH
-from raycore.bvh.simd import VECTOR_BYTES, block_width, lanes_for
+from raycore.bvh.leaves import FACE_COLUMN, face_ints
+from raycore.bvh.simd import BLOCK_PLANES, VECTOR_BYTES, block_width, lanes_for
 from raycore.bvh.traverse import MESH
 from raycore.bvh.validate import check_tree
 from raycore.mesh import Mesh
 from raycore.primitives import analytic
 
 #: The BVH layout the stored trees are in; a file made for another is refused (rebuild it).
-LAYOUT = {"node_width": NODE_WIDTH, "block_vector_bytes": VECTOR_BYTES, "max_depth": MAX_DEPTH}
+LAYOUT = {"node_width": NODE_WIDTH, "block_vector_bytes": VECTOR_BYTES,
+          "block_planes": BLOCK_PLANES, "max_depth": MAX_DEPTH}
 _ANALYTIC_KINDS = (analytic.SPHERE, analytic.PLANE, analytic.DISK, analytic.BOX,
                    analytic.TRANSFORMED_BOX, analytic.CYLINDER, analytic.CONE)
 _TREE_STATS = ("depth", "node_count", "leaf_count", "sah_cost")
@@ -66,7 +68,6 @@ def contents(scene, extra=None):
         arrays[f"mesh{i}.vertices"] = mesh.vertices
         arrays[f"mesh{i}.faces"] = mesh.faces
         arrays[f"mesh{i}.blocks"] = mesh.leaf_blocks
-        arrays[f"mesh{i}.slot_face"] = mesh.slot_face
         meshes.append(dict(_tree(mesh.bvh, f"mesh{i}", arrays),
                            build_seconds=mesh.build_seconds))
     params = scene.build_params
@@ -166,11 +167,12 @@ def _restore(Scene, meta, arrays):
         except ValueError as error:
             raise ValueError(f"the scene file is corrupt (mesh {i}: {error})") from error
         blocks = take(f"mesh{i}.blocks", dtype, (None, block_width(dtype)))
-        slot_face = take(f"mesh{i}.slot_face", np.int32, (lanes_for(dtype) * len(blocks),))
-        _within(slot_face, -1, len(mesh.faces), f"mesh {i}'s face indices")
+        lanes = lanes_for(dtype)
+        faces = face_ints(blocks)[:, FACE_COLUMN:FACE_COLUMN + lanes]
+        _within(faces, -1, len(mesh.faces), f"mesh {i}'s face indices")
         bvh = _bvh(take, f"mesh{i}", stats, None)
-        _checked_tree(bvh.nodes, len(blocks), lanes_for(dtype), f"mesh {i}")
-        mesh.restore(bvh, blocks, slot_face, dtype, scene.build_params, stats["build_seconds"])
+        _checked_tree(bvh.nodes, len(blocks), lanes, f"mesh {i}")
+        mesh.restore(bvh, blocks, dtype, scene.build_params, stats["build_seconds"])
         scene._meshes.append(mesh)
 
     placed = take("placement.objects", np.int64, (None,))

@@ -2,11 +2,14 @@
 
 A mesh's leaves are packed into blocks of L triangles, as many as a 256-bit vector holds
 coordinates in the scene's precision (eight float32 or four float64:
-:func:`~raycore.bvh.simd.lanes_for`).  A block is one row of 9 * L values: the x of the L first
-vertices, then their y and z, then the second and third vertices alike (Embree's Triangle8v and
-Triangle4v).  One vector instruction then works on a block's triangles
-(:func:`raycore.bvh.simd.watertight_block`).  A leaf of ``count`` triangles takes
-``ceil(count / L)`` consecutive blocks; the lanes left over are NaN, which no ray hits.
+:func:`~raycore.bvh.simd.lanes_for`).  A block is one row of BLOCK_PLANES * L values: the x of
+the L first vertices, then their y and z, then the second and third vertices alike (Embree's
+Triangle8v and Triangle4v), then the triangles' face indices, as int32 at the start of a plane
+of their own (its other half unused in float64).  One vector instruction then works on a
+block's triangles (:func:`raycore.bvh.simd.watertight_block`), and the face index of a hit
+lies in the lines its test loaded: read from a table of its own, it was a cache miss for a
+tenth of a random ray's time.  A leaf of ``count`` triangles takes ``ceil(count / L)``
+consecutive blocks; the lanes left over are NaN, which no ray hits, with face index -1.
 
 A triangle's *slot* is ``L * block + lane``.  Degenerate triangles (the cross product of their
 edges is exactly zero in the scene's precision, which every triangle test rejects) are stored
@@ -16,8 +19,26 @@ as NaN too: the test need not look for them.
 import numpy as np
 from numba import njit
 
+from raycore._memory import empty_on_line
 from raycore.bvh.layout import COUNTS, REFS, WIDTH
-from raycore.bvh.simd import block_lanes, block_width, lanes_for
+from raycore.bvh.simd import (
+    FACE_PLANE,
+    VECTOR_BYTES,
+    block_face,
+    block_lanes,
+    block_width,
+    lanes_for,
+    nonnegative,
+)
+
+#: Where a block's face indices start in its row viewed as int32 (:func:`face_ints`).
+FACE_COLUMN = FACE_PLANE * VECTOR_BYTES // 4
+
+
+def face_ints(blocks):
+    """The leaf blocks ``blocks`` (B, BLOCK_PLANES * L) viewed as int32: the face index of lane
+    ``lane`` of block ``b`` is at ``[b, FACE_COLUMN + lane]``."""
+    return blocks.view(np.int32)
 
 
 @njit(cache=True, inline="always")
@@ -25,6 +46,7 @@ def slot_index(blocks, slot, value):
     """Where value ``value`` (0..8: a.x, a.y, a.z, b.x, ..., c.z) of the triangle in ``slot``
     lies in ``blocks``: (row, column)."""
     lanes = block_lanes(blocks)
+    slot = nonnegative(slot)
     return slot // lanes, value * lanes + slot % lanes
 
 
@@ -34,14 +56,22 @@ def slot_value(blocks, slot, value):
     return blocks[slot_index(blocks, slot, value)]
 
 
+@njit(cache=True, inline="always")
+def slot_face(blocks, slot):
+    """Face index of the triangle in ``slot`` (-1 for a padding lane)."""
+    slot = nonnegative(slot)
+    lanes = block_lanes(blocks)
+    return block_face(blocks, slot // lanes, slot % lanes)
+
+
 @njit(cache=True)
-def _fill_blocks(vertices, faces, order, leaf_first, leaf_count, leaf_block, blocks, slot_face):
+def _fill_blocks(vertices, faces, order, leaf_first, leaf_count, leaf_block, blocks, ints):
     lanes = block_lanes(blocks)
     for leaf in range(len(leaf_first)):
         for k in range(leaf_count[leaf]):
             face = order[leaf_first[leaf] + k]
             slot = lanes * leaf_block[leaf] + k
-            slot_face[slot] = face
+            ints[slot // lanes, FACE_COLUMN + slot % lanes] = face
             for vertex in range(3):
                 for axis in range(3):
                     blocks[slot_index(blocks, slot, 3 * vertex + axis)] = vertices[
@@ -77,10 +107,8 @@ def pack_leaves(nodes, refs, order, vertices, faces, dtype):
 
     Returns
     -------
-    blocks : ndarray of dtype, shape (B, 9 * L)
-        L = :func:`~raycore.bvh.simd.lanes_for` (dtype).
-    slot_face : ndarray of int32, shape (L * B,)
-        Face index of each slot; -1 for padding lanes.
+    blocks : ndarray of dtype, shape (B, BLOCK_PLANES * L)
+        L = :func:`~raycore.bvh.simd.lanes_for` (dtype); starting on a cache line.
     """
     counts = refs[:, COUNTS:COUNTS + WIDTH]
     firsts = refs[:, REFS:REFS + WIDTH]
@@ -94,8 +122,18 @@ def pack_leaves(nodes, refs, order, vertices, faces, dtype):
     leaf_block = np.empty_like(leaf_first)
     leaf_block[by_first] = np.cumsum(sizes) - sizes
     block_count = int(sizes.sum())
-    blocks = np.full((block_count, block_width(dtype)), np.nan, dtype)
-    slot_face = np.full(block_count * lanes, -1, np.int32)
-    _fill_blocks(vertices, faces, order, leaf_first, leaf_count, leaf_block, blocks, slot_face)
+    blocks = empty_blocks(block_count, dtype)
+    blocks[:] = np.nan
+    ints = face_ints(blocks)
+    ints[:, FACE_COLUMN:] = -1
+    _fill_blocks(vertices, faces, order, leaf_first, leaf_count, leaf_block, blocks, ints)
     firsts[is_leaf] = leaf_block
-    return blocks, slot_face
+    return blocks
+
+
+def empty_blocks(count, dtype):
+    """Uninitialised room for ``count`` leaf blocks in precision ``dtype``, starting on a cache
+    line: each block then takes five lines, not six (as :func:`~raycore.bvh.simd.prefetch_block`
+    asks for them)."""
+    width = block_width(dtype)
+    return empty_on_line(count * width, dtype).reshape(count, width)

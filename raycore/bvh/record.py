@@ -22,9 +22,9 @@ FIELDS = (
     # per object: kind, analytic parameter row, mesh, inverse-transform row (-1: none); the
     # (P, PARAM_WIDTH) parameter table and the (T, 12) object-from-world matrices
     "kind", "param_row", "mesh_of", "xform_row", "params", "xforms",
-    # every mesh's wide rows and leaf blocks, concatenated, with each mesh's first row and first
-    # block, and the face index of every slot (raycore.bvh.leaves)
-    "mesh_nodes", "mesh_refs", "blocks", "slot_face", "node_base", "block_base",
+    # every mesh's wide rows and leaf blocks (raycore.bvh.leaves), concatenated, with each
+    # mesh's first row and first block
+    "mesh_nodes", "mesh_refs", "blocks", "node_base", "block_base",
 )
 
 
@@ -56,5 +56,4 @@ def arrays_of(scene):
     return SceneArrays(
         scene.top_nodes, scene.top_refs, scene.top_order, scene.direct,
         scene.kind, scene.param_row, scene.mesh_of, scene.xform_row, scene.params, scene.xforms,
-        scene.mesh_nodes, scene.mesh_refs, scene.blocks, scene.slot_face, scene.node_base,
-        scene.block_base)
+        scene.mesh_nodes, scene.mesh_refs, scene.blocks, scene.node_base, scene.block_base)

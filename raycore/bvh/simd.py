@@ -134,16 +134,42 @@ def lowest_set_bit(typingctx, mask):
     return sig, codegen
 
 
+@intrinsic
+def nonnegative(typingctx, index):
+    """``index`` (an int64 the caller knows is >= 0), with that fact told to LLVM
+    (``llvm.assume``).
+
+    Numba wraps a negative index around (``a[-1]`` is the last element) with a shift, a mask
+    and an add before every load and store through a signed index that LLVM cannot prove
+    non-negative: a traversal's stack slots and node rows, read and written at every node.
+    """
+    sig = types.int64(types.int64)
+
+    def codegen(context, builder, signature, args):
+        value = args[0]
+        assume = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ir.VoidType(), [ir.IntType(1)]), "llvm.assume")
+        builder.call(assume, [builder.icmp_signed(">=", value, ir.Constant(value.type, 0))])
+        return value
+
+    return sig, codegen
+
+
 #: A leaf block holds as many triangles as one 256-bit vector holds coordinates: eight in
 #: float32, four in float64 (Embree's Triangle8v and Triangle4v).  Each of the nine vertex
 #: coordinates is stored for the block's triangles side by side (a.x[L], a.y[L], a.z[L], b.x[L],
-#: ..., c.z[L]), so that a block takes 288 bytes in either precision.  Eight float32 lanes cost
-#: what four did and halve the blocks a leaf of up to eight needs: random rays 2-8 % faster and
-#: camera rays 3-7 % (one thread, float32, stanford-bunny, nefertiti, teapot, suzanne); eight
-#: float64 lanes (512 bits) made nefertiti's random rays 5 % slower, and sixteen float32 lanes
-#: 7-31 % slower.
+#: ..., c.z[L]), then the triangles' face indices as int32 (:mod:`raycore.bvh.leaves`): ten
+#: planes of 32 bytes, 320 bytes in either precision, five cache lines exactly where the blocks
+#: start on a line.  Eight float32 lanes cost what four did and halve the blocks a leaf of up to
+#: eight needs: random rays 2-8 % faster and camera rays 3-7 % (one thread, float32,
+#: stanford-bunny, nefertiti, teapot, suzanne); eight float64 lanes (512 bits) made nefertiti's
+#: random rays 5 % slower, and sixteen float32 lanes 7-31 % slower.
 VECTOR_BYTES = 32
 MAX_LANES = VECTOR_BYTES // 4
+#: Planes of a leaf block: nine coordinates, then the face indices.
+BLOCK_PLANES = 10
+FACE_PLANE = 9
+BLOCK_BYTES = BLOCK_PLANES * VECTOR_BYTES
 
 
 def lanes_for(dtype):
@@ -153,14 +179,13 @@ def lanes_for(dtype):
 
 def block_width(dtype):
     """Values per leaf block (a row of a mesh's blocks) in precision ``dtype``."""
-    return 9 * lanes_for(dtype)
+    return BLOCK_PLANES * lanes_for(dtype)
 
 
 @intrinsic
 def prefetch_block(typingctx, blocks, block):
-    """Ask the memory for the cache lines of leaf block ``block`` (9 * VECTOR_BYTES bytes: five
-    lines, or six where a block does not start on a line), as :func:`prefetch_row` does for a
-    node.
+    """Ask the memory for the five cache lines of leaf block ``block`` (BLOCK_BYTES bytes, from
+    a line: :func:`raycore.bvh.leaves.empty_blocks`), as :func:`prefetch_row` does for a node.
 
     The traversal asks for a leaf's blocks as soon as its node's test enters the leaf, and tests
     them once the node's other children are pushed: the first load of a block had been the
@@ -168,15 +193,33 @@ def prefetch_block(typingctx, blocks, block):
     3-7 % faster in float32 and 1-9 % in float64 (closest, any hit, count; stanford-bunny and
     nefertiti, one thread), up to 3 % on teapot and suzanne, cameras 0-2 %.
     """
-    block_bytes = 9 * VECTOR_BYTES
-    return types.void(blocks, block), _prefetch_codegen((*range(0, block_bytes, 64),
-                                                         block_bytes - 1))
+    return types.void(blocks, block), _prefetch_codegen(range(0, BLOCK_BYTES, 64))
+
+
+@intrinsic
+def block_face(typingctx, blocks, block, lane):
+    """The face index (int32, as an int64) in lane ``lane`` of leaf block ``block``'s face
+    plane: the plane holds int32 in either precision, so it is read through its bytes."""
+    sig = types.int64(blocks, block, lane)
+
+    def codegen(context, builder, signature, args):
+        blocks_v, block_v, lane_v = args
+        int64 = ir.IntType(64)
+        table = context.make_array(signature.args[0])(context, builder, blocks_v)
+        start = cgutils.get_item_pointer(context, builder, signature.args[0], table,
+                                         [block_v, ir.Constant(int64, 0)])
+        plane = builder.gep(builder.bitcast(start, ir.IntType(8).as_pointer()),
+                            [ir.Constant(int64, FACE_PLANE * VECTOR_BYTES)])
+        face = builder.gep(builder.bitcast(plane, ir.IntType(32).as_pointer()), [lane_v])
+        return builder.sext(builder.load(face, align=4), int64)
+
+    return sig, codegen
 
 
 @intrinsic
 def block_lanes(typingctx, blocks):
-    """Compiled :func:`lanes_for` of leaf blocks ``blocks`` (B, 9 * L): L, a constant of their
-    type, so that slot arithmetic compiles to shifts."""
+    """Compiled :func:`lanes_for` of leaf blocks ``blocks`` (B, BLOCK_PLANES * L): L, a constant
+    of their type, so that slot arithmetic compiles to shifts."""
     lanes = lanes_for(as_dtype(blocks.dtype))
 
     def codegen(context, builder, signature, args):
@@ -197,7 +240,7 @@ def watertight_block(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, s
 
     Parameters
     ----------
-    blocks : ndarray, shape (B, 9 * L)
+    blocks : ndarray, shape (B, BLOCK_PLANES * L)
         Leaf blocks in the rays' precision.
     block : int
         Row of ``blocks``.

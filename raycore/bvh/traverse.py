@@ -24,14 +24,16 @@ import numpy as np
 from numba import njit
 
 from raycore._fp import gamma, like, unit_roundoff
+from raycore._memory import LINE, empty_on_line
 from raycore.bvh.build import MAX_DEPTH
 from raycore.bvh.layout import COUNTS, REFS, WIDTH
-from raycore.bvh.leaves import slot_value
+from raycore.bvh.leaves import slot_face, slot_value
 from raycore.bvh.simd import (
     MAX_LANES,
     block_lanes,
     enter8,
     lowest_set_bit,
+    nonnegative,
     prefetch_block,
     prefetch_row,
     watertight_block,
@@ -59,10 +61,9 @@ HIT_CAPACITY = 64
 INT_FIXED = 4 * WIDTH + 2 * STACK_SIZE
 REAL_FIXED = WIDTH + 3 * MAX_LANES + 2 * STACK_SIZE
 
-#: Bytes of a cache line, and the least left unused after each thread's row: two threads' scratch
-#: never share a line (that false sharing made a ray that misses the mesh three times slower),
-#: and each row starts on a line, so that vector stores never straddle two.
-LINE = 64
+#: The least left unused after each thread's row: two threads' scratch never share a cache line
+#: (that false sharing made a ray that misses the mesh three times slower), and each row starts
+#: on a line, so that vector stores never straddle two.
 SCRATCH_GAP = 2 * LINE
 
 
@@ -98,9 +99,7 @@ def _line_rows(threads, count, dtype):
     bytes or more apart."""
     item = np.dtype(dtype).itemsize
     stride = -(-(count * item + SCRATCH_GAP) // LINE) * LINE // item
-    memory = np.empty(threads * stride + LINE // item, dtype)
-    start = -memory.ctypes.data % LINE // item
-    return memory[start:start + threads * stride].reshape(threads, stride)
+    return empty_on_line(threads * stride, dtype).reshape(threads, stride)
 
 
 @njit(cache=True, forceinline=True)
@@ -193,9 +192,10 @@ def _descend(nodes, refs, row, row_base, box, lo, hi, stack, stack_t, top, entry
     -------
     next_row, top, leaves
     """
+    row = nonnegative(row)
     mask = enter8(nodes, row, box, lo, hi, entry)
     leaves = 0
-    base = top
+    base = top = nonnegative(top)
     while mask:
         # visit the entered children only, without a branch per slot
         j = lowest_set_bit(mask)
@@ -215,10 +215,11 @@ def _descend(nodes, refs, row, row_base, box, lo, hi, stack, stack_t, top, entry
         # insertion into this node's run of the stack, farthest first
         t = entry[j]
         k = top
-        while ordered and k > base and stack_t[k - 1] < t:
-            stack[k] = stack[k - 1]
-            stack_t[k] = stack_t[k - 1]
+        while ordered and k > base and stack_t[nonnegative(k - 1)] < t:
+            stack[nonnegative(k)] = stack[nonnegative(k - 1)]
+            stack_t[nonnegative(k)] = stack_t[nonnegative(k - 1)]
             k -= 1
+        k = nonnegative(k)
         stack[k] = row_base + ref
         stack_t[k] = t
         prefetch_row(nodes, row_base + ref)  # loaded while the siblings are visited
@@ -548,7 +549,7 @@ def _face_id(scene, obj, prim):
     """The primitive id users see: the face index for a mesh hit (``prim`` is a slot), the
     surface part's row 0 for an analytic shape."""
     if scene.kind[obj] == MESH:
-        return np.int64(scene.slot_face[prim])
+        return slot_face(scene.blocks, prim)
     return np.int64(0)
 
 

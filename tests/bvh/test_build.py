@@ -10,6 +10,7 @@ import pytest
 from raycore import Scene
 from raycore.bvh.build import CHUNK, MAX_DEPTH, MIN_TASK, BuildParams, build_binary_bvh
 from raycore.bvh.layout import COUNTS, REFS, WIDTH, build_bvh
+from raycore.bvh.leaves import FACE_COLUMN, face_ints
 from raycore.bvh.records import (
     BINARY_COUNT,
     BINARY_REF,
@@ -18,7 +19,7 @@ from raycore.bvh.records import (
     check_primitive_count,
     records_from_bounds,
 )
-from raycore.bvh.simd import lanes_for
+from raycore.bvh.simd import BLOCK_PLANES, lanes_for
 from raycore.mesh import Mesh
 
 
@@ -53,17 +54,25 @@ def walk(bvh, internal=None):
                 stack.append((ref, lo, hi))
 
 
+def slot_faces(mesh):
+    """(L * B,) face index of each slot of a built mesh's blocks, -1 for padding (the blocks'
+    face plane: raycore.bvh.leaves)."""
+    lanes = lanes_for(mesh.leaf_blocks.dtype)
+    return face_ints(mesh.leaf_blocks)[:, FACE_COLUMN:FACE_COLUMN + lanes].ravel()
+
+
 def unpacked(mesh):
     """A built mesh's tree with its leaves pointing into a leaf order again, as the build made
     it: the blocks' face indices in slot order, padding left out (raycore.bvh.leaves)."""
-    real = mesh.slot_face >= 0
+    faces = slot_faces(mesh)
+    real = faces >= 0
     position = np.cumsum(real) - 1  # of each slot, in the order without padding
     refs = mesh.bvh.refs.copy()
     firsts = refs[:, REFS:REFS + WIDTH]
     leaf = refs[:, COUNTS:COUNTS + WIDTH] > 0
     firsts[leaf] = position[lanes_for(mesh.leaf_blocks.dtype) * firsts[leaf]]
     return replace(mesh.bvh, nodes=refs.view(np.float32), refs=refs,
-                   order=mesh.slot_face[real].astype(np.int64))
+                   order=faces[real].astype(np.int64))
 
 
 def check_leaves(bvh, lo, hi, max_leaf_size):
@@ -230,11 +239,19 @@ def test_mesh_leaves_hold_each_triangle_as_the_scene_stores_it(dtype):
     corners = stored[faces]  # (F, 3, 3), a reference built without the compiled passes
     check_leaves(unpacked(mesh), corners.min(axis=1), corners.max(axis=1), params.max_leaf_size)
     assert mesh.leaf_blocks.dtype == np.dtype(dtype)
-    slots = np.flatnonzero(mesh.slot_face >= 0)
-    # block b holds value j (a.x, a.y, ..., c.z) of lane l at [b, j * lanes + l]
+    faces_of_slots = slot_faces(mesh)
+    slots = np.flatnonzero(faces_of_slots >= 0)
+    # block b holds value j (a.x, a.y, ..., c.z) of lane l at [b, j * lanes + l], then the
+    # face indices
     lanes = lanes_for(dtype)
-    stored_corners = mesh.leaf_blocks.reshape(-1, 9, lanes)[slots // lanes, :, slots % lanes]
-    assert np.array_equal(stored_corners, corners[mesh.slot_face[slots]].reshape(-1, 9))
+    stored_corners = mesh.leaf_blocks.reshape(-1, BLOCK_PLANES, lanes)[slots // lanes, :9,
+                                                                       slots % lanes]
+    assert np.array_equal(stored_corners, corners[faces_of_slots[slots]].reshape(-1, 9))
+    # every face once, padding lanes NaN
+    assert np.array_equal(np.sort(faces_of_slots[slots]), np.arange(len(faces)))
+    padding = np.flatnonzero(faces_of_slots < 0)
+    assert np.all(np.isnan(mesh.leaf_blocks.reshape(-1, BLOCK_PLANES, lanes)[
+        padding // lanes, :9, padding % lanes]))
     assert np.array_equal(mesh.bvh.lo, stored.min(axis=0))
     lo, hi = mesh.bounds
     assert np.array_equal(lo, vertices.min(axis=0)) and np.array_equal(hi, vertices.max(axis=0))

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from numba import njit
 
+from raycore.bvh.leaves import FACE_COLUMN, face_ints
 from raycore.bvh.simd import block_lanes, block_width, lanes_for, watertight_block
 from raycore.primitives.triangle import watertight, watertight_setup
 
@@ -46,13 +47,16 @@ def _both_tests(blocks, origins, directions, tmin, tmax):
 
 
 def _blocks(triangles, dtype):
-    """Triangles (T, 3, 3) packed into blocks as the leaves hold them (padding NaN)."""
+    """Triangles (T, 3, 3) packed into blocks as the leaves hold them (padding NaN, face
+    indices -1)."""
     lanes = lanes_for(dtype)
     count = -(-len(triangles) // lanes) * lanes
     padded = np.full((count, 9), np.nan)
     padded[:len(triangles)] = triangles.reshape(-1, 9)
-    return np.ascontiguousarray(
-        padded.reshape(-1, lanes, 9).transpose(0, 2, 1).reshape(-1, block_width(dtype)), dtype)
+    blocks = np.full((count // lanes, block_width(dtype)), np.nan, dtype)
+    blocks[:, :9 * lanes] = padded.reshape(-1, lanes, 9).transpose(0, 2, 1).reshape(-1, 9 * lanes)
+    face_ints(blocks)[:, FACE_COLUMN:] = -1
+    return blocks
 
 
 def _fan(dtype):

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from raycore import Scene, arrayfile, scene_file
+from raycore.bvh.leaves import FACE_COLUMN, face_ints
 
 from .brute import random_scene, scene_rays, shared_mesh
 
@@ -115,7 +116,7 @@ def test_truncated_file_is_refused(saved, tmp_path, keep):
 
 
 @pytest.mark.parametrize("name", ["kind", "params", "xforms", "top.nodes", "mesh0.nodes",
-                                  "mesh0.blocks", "mesh0.slot_face", "mesh3.faces"])
+                                  "mesh0.blocks", "mesh3.faces"])
 def test_flipped_bit_in_any_array_is_refused(saved, tmp_path, name):
     _, _, path, _ = saved
 
@@ -223,7 +224,8 @@ CRAFTED = {
     "transform row out of range": lambda m, a: a["xform_row"].__setitem__(
         int(np.flatnonzero(a["xform_row"] >= 0)[0]), 10**6),
     "face index out of range": lambda m, a: a["mesh0.faces"].__setitem__((0, 0), 10**6),
-    "slot face out of range": lambda m, a: a["mesh0.slot_face"].__setitem__(0, 10**6),
+    "slot face out of range": lambda m, a: face_ints(a["mesh0.blocks"]).__setitem__(
+        (0, FACE_COLUMN), 10**6),
     "direct object out of range": lambda m, a: a["top.direct"].__setitem__(0, 10**6),
     "missing array": lambda m, a: a.pop("mesh2.blocks"),
     "wrong dtype": lambda m, a: a.__setitem__("kind", a["kind"].astype(np.int32)),
