@@ -7,8 +7,8 @@ the L first vertices, then their y and z, then the second and third vertices ali
 Triangle8v and Triangle4v), then the triangles' face indices, as int32 at the start of a plane
 of their own (its other half unused in float64).  One vector instruction then works on a
 block's triangles (:func:`raycore.bvh.simd.watertight_block`), and the face index of a hit
-lies in the lines its test loaded: read from a table of its own, it was a cache miss for a
-tenth of a random ray's time.  A leaf of ``count`` triangles takes ``ceil(count / L)``
+lies in the lines its test loaded: read from a table of its own, it was a cache miss sampled
+at about 5 % of a random ray's time.  A leaf of ``count`` triangles takes ``ceil(count / L)``
 consecutive blocks; the lanes left over are NaN, which no ray hits, with face index -1.
 
 A triangle's *slot* is ``L * block + lane``.  Degenerate triangles (the cross product of their
