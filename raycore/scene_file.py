@@ -98,22 +98,27 @@ def dumps(scene):
 
 def load(source, *, mmap=False):
     """A built Scene from a file :func:`save` wrote (or its bytes); see ``Scene.load``."""
-    return load_with_extra(source, mmap=mmap)[0]
+    return _loaded(source, mmap)[0]
 
 
 def load_with_extra(source, *, mmap=False):
     """``(scene, extra_meta, extra_arrays)`` from a file :func:`save` wrote with ``extra``
     (None and {} without)."""
+    scene, meta, arrays = _loaded(source, mmap)
+    extra = {name[len("extra."):]: array for name, array in arrays.items()
+             if name.startswith("extra.")}
+    return scene, meta.get("extra"), extra
+
+
+def _loaded(source, mmap):
+    """``(scene, meta, arrays)`` of a file :func:`save` wrote."""
     from raycore.scene import Scene
 
     meta, arrays = arrayfile.read(source, mmap=mmap)
     try:
-        scene = _restore(Scene, meta, arrays)
+        return _restore(Scene, meta, arrays), meta, arrays
     except (KeyError, TypeError, AttributeError) as error:
         raise ValueError(f"the scene file is corrupt (missing or malformed {error})") from error
-    extra = {name[len("extra."):]: array for name, array in arrays.items()
-             if name.startswith("extra.")}
-    return scene, meta.get("extra"), extra
 
 
 def _taker(arrays):
@@ -266,8 +271,8 @@ def _object_problem(kind, param_row, mesh_of, xform_row, param_rows, xform_rows,
 @njit(cache=True)
 def _outside(indices, n):
     """Whether any of ``indices`` (int64) lies outside [0, n)."""
-    for index in indices:
-        if index < 0 or index >= n:
+    for i in range(len(indices)):
+        if indices[i] < 0 or indices[i] >= n:
             return True
     return False
 
@@ -294,17 +299,21 @@ def _mesh_problem(vertices, faces, slot_faces):
     slot_faces : ndarray of int32, shape (B, L)
         The face index of each lane of each leaf block.
     """
+    # loops over indices, without an early exit, that LLVM vectorises: iterating the arrays
+    # took twice as long (1.04 against 0.52 ms for 2.4M coordinates)
     if len(faces) == 0:
         return 1
+    coordinates = vertices.reshape(-1)
     finite = True
-    for x in vertices.reshape(-1):  # without an early exit, the loop is vectorised
-        finite &= np.isfinite(x)
+    for i in range(len(coordinates)):
+        finite &= np.isfinite(coordinates[i])
     if not finite:
         return 2
     # one comparison for both ends: a negative index taken as unsigned is past any vertex
+    indices = faces.reshape(-1).view(np.uint64)
     top = np.uint64(0)
-    for index in faces.reshape(-1).view(np.uint64):
-        top = max(top, index)
+    for i in range(len(indices)):
+        top = max(top, indices[i])
     if top >= np.uint64(len(vertices)):
         return 3
     top = np.uint64(0)
