@@ -83,7 +83,7 @@ class Mesh:
     """
 
     def __init__(self, vertices, faces):
-        self.vertices = as_float_array(vertices, "vertices", np.float64, (None, 3))
+        vertices = as_float_array(vertices, "vertices", np.float64, (None, 3))
         faces = np.asarray(faces)
         if faces.dtype.kind not in "iu":
             if faces.dtype.kind != "f" or not np.all(np.isfinite(faces)) or np.any(
@@ -93,11 +93,16 @@ class Mesh:
             raise ValueError(f"faces must have shape (F, 3), got {faces.shape}")
         if len(faces) == 0:
             raise ValueError("faces must hold at least one triangle")
-        if faces.min() < 0 or faces.max() >= len(self.vertices):
+        if faces.min() < 0 or faces.max() >= len(vertices):
             raise ValueError(
-                f"faces must index vertices in [0, {len(self.vertices)}), "
+                f"faces must index vertices in [0, {len(vertices)}), "
                 f"got indices in [{faces.min()}, {faces.max()}]")
-        self.faces = np.ascontiguousarray(faces, dtype=np.int64)
+        self._set(vertices, np.ascontiguousarray(faces, dtype=np.int64))
+
+    def _set(self, vertices, faces):
+        """Hold valid ``vertices`` (V, 3) float64 and ``faces`` (F, 3) int64, both C-ordered,
+        with no BVH yet."""
+        self.vertices, self.faces = vertices, faces
         self._bounds = None
         self.bvh = None  # its leaves reference leaf_blocks once built
         self.leaf_blocks = None
@@ -142,12 +147,21 @@ class Mesh:
         self.build_seconds = time.perf_counter() - start
         self._built_for = (dtype, params)
 
-    def restore(self, bvh, leaf_blocks, dtype, params, build_seconds):
-        """Take a BVH built earlier for this mesh (by :meth:`build`, as
-        :mod:`raycore.scene_file` stored it) in place of building one."""
-        self.bvh, self.leaf_blocks = bvh, leaf_blocks
-        self.build_seconds = build_seconds
-        self._built_for = (dtype, params)
+    @classmethod
+    def restored(cls, vertices, faces, bvh, leaf_blocks, dtype, params, build_seconds):
+        """A mesh with the BVH that :meth:`build` made for it earlier, as
+        :mod:`raycore.scene_file` stored them, in place of building one.
+
+        The caller has checked the arrays (``raycore.scene_file._mesh_problem``): ``vertices``
+        (V, 3) float64, finite; ``faces`` (F, 3) int64 in [0, V), F > 0; both C-ordered.  The
+        checks of ``__init__``, which take any array_like, are not repeated.
+        """
+        mesh = cls.__new__(cls)
+        mesh._set(vertices, faces)
+        mesh.bvh, mesh.leaf_blocks = bvh, leaf_blocks
+        mesh.build_seconds = build_seconds
+        mesh._built_for = (dtype, params)
+        return mesh
 
     @property
     def nbytes(self):

@@ -14,6 +14,7 @@ nodes inside a range reserved for it (a subtree over n primitives has at most 2n
 Nothing depends on which thread builds what, so the tree is the same for any number of threads.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,7 +90,7 @@ class BuildParams:
         for name in ("traversal_cost", "intersection_cost"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float, np.integer, np.floating))
-                    and not isinstance(value, bool) and np.isfinite(value) and value > 0):
+                    and not isinstance(value, bool) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be positive and finite, got {value!r}")
 
 

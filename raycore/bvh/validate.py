@@ -68,8 +68,9 @@ def _tree_problem(nodes, refs, leaf_limit, blocks):
             if count < 0:
                 return 1
             if count > 0:
-                items = (count + blocks - 1) // blocks
-                if ref < 0 or ref + items > leaf_limit:
+                # its ceil(count / blocks) items from ref fit below leaf_limit (a division per
+                # leaf took a sixth of the check)
+                if ref < 0 or count > (leaf_limit - ref) * blocks:
                     return 2
                 continue
             unused = ref == 0

@@ -276,3 +276,25 @@ def test_save_is_atomic_and_leaves_no_temporary(tmp_path):
     scene.save(tmp_path / "a.rcs")  # replaces it
     assert [p.name for p in tmp_path.iterdir()] == ["a.rcs"]
     assert len(Scene.load(tmp_path / "a.rcs")) == 2
+
+
+@pytest.mark.parametrize("cut", [None, 0.5, -1])
+def test_threaded_read_in_pieces(saved, tmp_path, monkeypatch, cut):
+    """A large file's path (pieces read and checksummed on threads), taken with small chunks so
+    that this file has many: the same answers, or "truncated" for a cut copy."""
+    scene, expected, _, rays = saved
+    monkeypatch.setattr(arrayfile, "CHUNK", 4096)  # written and read with 4 KiB chunks
+    monkeypatch.setattr(arrayfile, "THREADED_BYTES", 0)
+    monkeypatch.setattr(arrayfile, "get_num_threads", lambda: 2)
+    path = tmp_path / "pieces.rcs"
+    scene.save(path)
+    if cut is not None:
+        size = path.stat().st_size
+        path = tampered(path, tmp_path, lambda data: data.__delitem__(
+            slice(int(size * cut) % size, None)))
+        with pytest.raises(ValueError, match="truncated"):
+            Scene.load(path)
+        return
+    got = answers(Scene.load(path), rays)
+    for name, value in expected.items():
+        np.testing.assert_array_equal(got[name], value, err_msg=name)
