@@ -87,17 +87,16 @@ def render(scene, origins, directions, width, height, shading="lambert", *, samp
     if origins.shape != (rays, 3):
         raise ValueError(f"origins must have shape ({rays}, 3) for a {width}x{height} image of "
                          f"{samples} samples a pixel, got {origins.shape}")
-    if shading == "lambert":
-        light = _unit_light(light_direction)
-        colors = _color_table(colors, len(scene))
     background = srgb_to_linear(np.asarray(background, np.float64) / 255).astype(np.float32)
     image = np.empty((width * height, 3), np.uint8)
     if shading == "lambert":
-        _lambert(scene, origins, directions, smooth, light, colors, float(ambient), background,
-                 weights, triangle_test, image)
+        _lambert(scene, origins, directions, smooth, _unit_light(light_direction),
+                 _color_table(colors, len(scene)), float(ambient), background, weights,
+                 triangle_test, image)
         return image.reshape(height, width, 3)
-    fields = (("normal", "shading_normal") if smooth else ("normal",)) \
-        if shading == "normal" else ()
+    fields = ()
+    if shading == "normal":
+        fields = ("normal", "shading_normal") if smooth else ("normal",)
     hits = scene.intersect(origins, directions, triangle_test=triangle_test, fields=fields)
     linear = np.empty((rays, 3), np.float32)
     linear[:] = background
