@@ -518,7 +518,7 @@ def _surface_fields(scene, origins, directions, t, obj, slot, u, v, uv, normal, 
             continue
         # before any store: the compiler cannot tell that the outputs do not overlap the rays
         nx, ny, nz, su, sv = hit_surface(scene, origins, directions, t, obj, slot, u, v, i,
-                                         want_normal)
+                                         want_normal, want_uv)
         if want_point:
             ox, oy, oz = origins[i, 0], origins[i, 1], origins[i, 2]
             dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
@@ -535,17 +535,18 @@ def _surface_fields(scene, origins, directions, t, obj, slot, u, v, uv, normal, 
 
 
 @njit(inline="always")
-def hit_surface(scene, origins, directions, t, obj, slot, u, v, i, want_normal):
+def hit_surface(scene, origins, directions, t, obj, slot, u, v, i, want_normal, want_uv):
     """Unit geometric normal and surface parameters ``(u, v)`` of hit ``i`` (not a miss), in
     the rays' precision, as :func:`surface_fields` gives them; for the passes over closest hits
     (``scene``: :data:`raycore.bvh.record.SceneArrays`).  A mesh hit's normal is only computed
-    when ``want_normal``."""
+    when ``want_normal``, an analytic hit's ``(u, v)`` when ``want_uv`` (else NaN)."""
     real = t[i]  # of the rays' precision
     k = scene.kind[obj[i]]
     if k != MESH:
         nx, ny, nz, su, sv = _analytic_surface_inline(
             k, scene.params[scene.param_row[obj[i]]], origins[i, 0], origins[i, 1],
-            origins[i, 2], directions[i, 0], directions[i, 1], directions[i, 2], t[i], slot[i])
+            origins[i, 2], directions[i, 0], directions[i, 1], directions[i, 2], t[i], slot[i],
+            want_uv)
         return like(real, nx), like(real, ny), like(real, nz), like(real, su), like(real, sv)
     nan = like(real, np.nan)
     if not want_normal:

@@ -375,7 +375,7 @@ def _light_items(scene, tables, origins, directions, t, geom_id, prim_id, u, v, 
             if not distance < np.inf:  # a miss
                 continue
             nx, ny, nz, _, _ = hit_surface(scene, origins, directions, t, geom_id, slot, u, v,
-                                           i, True)
+                                           i, True, False)
             sx, sy, sz = nx, ny, nz
             if smooth:
                 sx, sy, sz = interpolated_normal(tables, geom_id[i], prim_id[i], u[i], v[i],
