@@ -362,8 +362,10 @@ def _light_items(scene, tables, origins, directions, t, geom_id, prim_id, u, v, 
     the item's first row on; ``counts``: the item's lit hits.
 
     The normals stay in registers: written out as the hits' fields and read back, they and the
-    shadow rays of every ray (unlit ones given an empty interval) took 19.5 of 79 ms of a
-    512x512, 4-sample demo render.
+    shadow rays of every ray (unlit ones given an empty interval, which the occlusion query
+    still paid for) took 19.5 of 79 ms of a 512x512, 4-sample demo render.  This pass and the
+    gather take about as long as those passes on the demo and less on stanford-bunny, and the
+    lit hits' shadow rays alone trace 20 % (demo) and 40 % (bunny) faster.
     """
     light_x, light_y, light_z = light[0], light[1], light[2]
     n = len(t)
