@@ -70,7 +70,7 @@ def measure(name, scene, colors, position, look_at, rounds):
     best, _ = interleaved_best_times({"render": full_render, "tracing": tracing,
                                       "tracing_with_normals": tracing_with_normals}, rounds)
     hit = float(np.mean(scene.intersect(origins, directions).hit))
-    lit = float(np.mean(shadow_args[3] >= 0))
+    lit = len(shadow_args[0]) / len(origins)  # a shadow ray per lit hit
     return {"scene": name, "size": f"{SIZE}x{SIZE}", "samples": SAMPLES,
             "rays": len(origins), "hit_fraction": round(hit, 3),
             "shadow_rays_traced_fraction": round(lit, 3),

@@ -7,7 +7,7 @@ the view, image y grows downwards.
 """
 
 import numpy as np
-from numba import njit, prange
+from numba import get_num_threads, get_thread_id, njit, prange
 
 from raycore._memory import empty_aligned
 from raycore.rays import as_float_array, resolve_dtype
@@ -90,7 +90,7 @@ def _unit(x, y, z):
 
 @njit(cache=True, parallel=True, _nrt=False)
 def _sample_rays_kernel(center, right, up, x_scale, y_scale, width, height, samples, rows,
-                        columns, seed, unit, constant, points, constants):
+                        columns, seed, unit, constant, scratch, points, constants):
     """:func:`_plane_rays_kernel` for ``samples`` jittered rays per pixel, pixel by pixel: ray
     ``(h * width + w) * samples + s`` goes through a random point of sample ``s``'s stratum
     (see :func:`strata`); image coordinates in [-1, 1] are scaled by ``x_scale``, ``y_scale``.
@@ -99,7 +99,11 @@ def _sample_rays_kernel(center, right, up, x_scale, y_scale, width, height, samp
     same rays where those are powers of two (512 pixels, 2x2 strata), else unit directions
     within 2 float64 epsilons of the divided ones (float32 rays came out the same in every size
     tried).  The strata are walked row by row (no integer division per ray) and the camera's
-    vectors read once into scalars: 7.0 -> 5.2 ms for 512x512 pixels of 4 samples, alone.
+    vectors read once into scalars: 7.0 -> 5.2 ms for 512x512 pixels of 4 samples, alone.  A
+    row's rays of one sample are made for all its pixels at once, into the calling thread's
+    ``scratch`` row ((threads, 3, width) of the rays' precision), then put in place: LLVM makes
+    vector code of that loop, which it did not of one over a pixel's samples, whose rays lie
+    next to each other (the same rays, 15-30 % faster).
     """
     last = samples - columns * (rows - 1)
     to_x, to_y = 1.0 / width, 1.0 / height
@@ -109,11 +113,13 @@ def _sample_rays_kernel(center, right, up, x_scale, y_scale, width, height, samp
     up_x, up_y, up_z = up[0], up[1], up[2]
     constant_x, constant_y, constant_z = constant[0], constant[1], constant[2]
     for h in prange(height):
-        for w in range(width):
-            ray = (h * width + w) * samples
-            for row in range(rows):
-                cells, per_cell = (columns, per_column) if row < rows - 1 else (last, per_last)
-                for cell in range(cells):
+        made = scratch[get_thread_id()]
+        sample = 0
+        for row in range(rows):
+            cells, per_cell = (columns, per_column) if row < rows - 1 else (last, per_last)
+            for cell in range(cells):
+                for w in range(width):
+                    ray = (h * width + w) * samples + sample
                     sx = (cell + _hash01(2 * ray, seed)) * per_cell
                     sy = (row + _hash01(2 * ray + 1, seed)) * per_row
                     across = ((w + sx) * to_x * 2 - 1) * x_scale
@@ -123,13 +129,19 @@ def _sample_rays_kernel(center, right, up, x_scale, y_scale, width, height, samp
                     z = center_z + across * right_z + rise * up_z
                     if unit:
                         x, y, z = _unit(x, y, z)
-                    points[ray, 0] = x
-                    points[ray, 1] = y
-                    points[ray, 2] = z
-                    constants[ray, 0] = constant_x
-                    constants[ray, 1] = constant_y
-                    constants[ray, 2] = constant_z
-                    ray += 1
+                    made[0, w] = x
+                    made[1, w] = y
+                    made[2, w] = z
+                for w in range(width):
+                    ray = (h * width + w) * samples + sample
+                    points[ray, 0] = made[0, w]
+                    points[ray, 1] = made[1, w]
+                    points[ray, 2] = made[2, w]
+                sample += 1
+        for ray in range(h * width * samples, (h + 1) * width * samples):
+            constants[ray, 0] = constant_x
+            constants[ray, 1] = constant_y
+            constants[ray, 2] = constant_z
 
 
 def _camera_rays(center, right, up, x_scale, y_scale, width, height, constant, dtype, samples,
@@ -144,8 +156,8 @@ def _camera_rays(center, right, up, x_scale, y_scale, width, height, constant, d
     points = empty_aligned((width * height * samples, 3), dtype)
     constants = empty_aligned(points.shape, dtype)
     _sample_rays_kernel(center, right, up, float(x_scale), float(y_scale), width, height,
-                        samples, rows, columns, np.uint64(seed), unit, constant, points,
-                        constants)
+                        samples, rows, columns, np.uint64(seed), unit, constant,
+                        np.empty((get_num_threads(), 3, width), dtype), points, constants)
     return points, constants
 
 

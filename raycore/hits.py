@@ -1,5 +1,6 @@
 """Result types of ray queries."""
 
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,6 +17,14 @@ def check_fields(fields):
     if unknown:
         raise ValueError(f"fields must be among {SURFACE_FIELDS}, got {unknown}")
     return fields
+
+
+#: Closest hits as a compiled pass over them takes them (``Scene._surface_hits``): the scene's
+#: record, its vertex normal tables (:attr:`raycore.shading.NormalTables.arrays`), the rays as
+#: traced ((N, 3) each), and per ray t, geometry and primitive ids, barycentrics and slot (as
+#: :func:`raycore.queries.closest_hits` gives them).
+SurfaceHits = namedtuple("SurfaceHits", ["record", "tables", "origins", "directions", "t",
+                                         "geom_id", "prim_id", "u", "v", "slot"])
 
 
 @dataclass(frozen=True, init=False)

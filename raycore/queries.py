@@ -16,6 +16,7 @@ from functools import partial
 import numpy as np
 from numba import get_num_threads, get_thread_id, njit, parallel_chunksize, prange
 
+from raycore._fp import like
 from raycore._memory import empty_aligned
 from raycore.bvh.leaves import slot_value
 from raycore.bvh.record import arrays_of
@@ -488,10 +489,10 @@ def surface_fields(record, origins, directions, t, obj, slot, u, v, want_uv, wan
     return uv, normal, point
 
 
-#: :func:`raycore.primitives.analytic.analytic_surface` inlined into :func:`_surface_fields`: a
+#: :func:`raycore.primitives.analytic.analytic_surface` inlined into :func:`hit_surface`: a
 #: call per analytic hit, its parameter row passed as an array, made the demo render's fields
 #: (836K plane hits of 1M rays) 7.6 ms, inlined 4.3 ms.  Not cached on its own: it is compiled
-#: into _surface_fields, which is.
+#: into the passes that call hit_surface, which are.
 _analytic_surface_inline = njit(error_model="numpy", forceinline=True)(analytic_surface.py_func)
 
 
@@ -505,7 +506,6 @@ def _surface_fields(scene, origins, directions, t, obj, slot, u, v, uv, normal, 
     """Fill the rows of ``uv``, ``normal`` and ``point`` (each N rows, or none) for each ray."""
     n = len(t)
     want_uv, want_normal, want_point = len(uv) == n, len(normal) == n, len(point) == n
-    blocks = scene.blocks
     for i in prange(n):
         if obj[i] < 0:
             for a in range(3):
@@ -516,38 +516,15 @@ def _surface_fields(scene, origins, directions, t, obj, slot, u, v, uv, normal, 
                 if want_point:
                     point[i, a] = np.nan
             continue
-        ox, oy, oz = origins[i, 0], origins[i, 1], origins[i, 2]
-        dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
+        # before any store: the compiler cannot tell that the outputs do not overlap the rays
+        nx, ny, nz, su, sv = hit_surface(scene, origins, directions, t, obj, slot, u, v, i,
+                                         want_normal, want_uv)
         if want_point:
+            ox, oy, oz = origins[i, 0], origins[i, 1], origins[i, 2]
+            dx, dy, dz = directions[i, 0], directions[i, 1], directions[i, 2]
             point[i, 0] = ox + t[i] * dx
             point[i, 1] = oy + t[i] * dy
             point[i, 2] = oz + t[i] * dz
-        k = scene.kind[obj[i]]
-        if k == MESH:
-            if want_uv:
-                uv[i, 0] = u[i]
-                uv[i, 1] = v[i]
-            if want_normal:
-                s = slot[i]
-                nx, ny, nz = triangle_normal(
-                    slot_value(blocks, s, 0), slot_value(blocks, s, 1), slot_value(blocks, s, 2),
-                    slot_value(blocks, s, 3), slot_value(blocks, s, 4), slot_value(blocks, s, 5),
-                    slot_value(blocks, s, 6), slot_value(blocks, s, 7), slot_value(blocks, s, 8))
-                r = scene.xform_row[obj[i]]
-                if r >= 0:
-                    # normals transform by the inverse transpose; xforms hold the inverse
-                    m = scene.xforms
-                    nx, ny, nz = (m[r, 0] * nx + m[r, 4] * ny + m[r, 8] * nz,
-                                  m[r, 1] * nx + m[r, 5] * ny + m[r, 9] * nz,
-                                  m[r, 2] * nx + m[r, 6] * ny + m[r, 10] * nz)
-                    length = np.sqrt(nx * nx + ny * ny + nz * nz)
-                    nx, ny, nz = nx / length, ny / length, nz / length
-                normal[i, 0] = nx
-                normal[i, 1] = ny
-                normal[i, 2] = nz
-            continue
-        nx, ny, nz, su, sv = _analytic_surface_inline(
-            k, scene.params[scene.param_row[obj[i]]], ox, oy, oz, dx, dy, dz, t[i], slot[i])
         if want_uv:
             uv[i, 0] = su
             uv[i, 1] = sv
@@ -555,3 +532,38 @@ def _surface_fields(scene, origins, directions, t, obj, slot, u, v, uv, normal, 
             normal[i, 0] = nx
             normal[i, 1] = ny
             normal[i, 2] = nz
+
+
+@njit(inline="always")
+def hit_surface(scene, origins, directions, t, obj, slot, u, v, i, want_normal, want_uv):
+    """Unit geometric normal and surface parameters ``(u, v)`` of hit ``i`` (not a miss), in
+    the rays' precision, as :func:`surface_fields` gives them; for the passes over closest hits
+    (``scene``: :data:`raycore.bvh.record.SceneArrays`).  A mesh hit's normal is only computed
+    when ``want_normal``, an analytic hit's ``(u, v)`` when ``want_uv`` (else NaN)."""
+    real = t[i]  # of the rays' precision
+    k = scene.kind[obj[i]]
+    if k != MESH:
+        nx, ny, nz, su, sv = _analytic_surface_inline(
+            k, scene.params[scene.param_row[obj[i]]], origins[i, 0], origins[i, 1],
+            origins[i, 2], directions[i, 0], directions[i, 1], directions[i, 2], t[i], slot[i],
+            want_uv)
+        return like(real, nx), like(real, ny), like(real, nz), like(real, su), like(real, sv)
+    nan = like(real, np.nan)
+    if not want_normal:
+        return nan, nan, nan, u[i], v[i]
+    blocks = scene.blocks
+    s = slot[i]
+    nx, ny, nz = triangle_normal(
+        slot_value(blocks, s, 0), slot_value(blocks, s, 1), slot_value(blocks, s, 2),
+        slot_value(blocks, s, 3), slot_value(blocks, s, 4), slot_value(blocks, s, 5),
+        slot_value(blocks, s, 6), slot_value(blocks, s, 7), slot_value(blocks, s, 8))
+    r = scene.xform_row[obj[i]]
+    if r >= 0:
+        # normals transform by the inverse transpose; xforms hold the inverse
+        m = scene.xforms
+        nx, ny, nz = (m[r, 0] * nx + m[r, 4] * ny + m[r, 8] * nz,
+                      m[r, 1] * nx + m[r, 5] * ny + m[r, 9] * nz,
+                      m[r, 2] * nx + m[r, 6] * ny + m[r, 10] * nz)
+        length = np.sqrt(nx * nx + ny * ny + nz * nz)
+        nx, ny, nz = nx / length, ny / length, nz / length
+    return like(real, nx), like(real, ny), like(real, nz), u[i], v[i]

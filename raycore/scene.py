@@ -18,7 +18,7 @@ from raycore.bvh.layout import NODE_WIDTH, build_bvh
 from raycore.bvh.leaves import empty_blocks
 from raycore.bvh.record import SceneRecord
 from raycore.bvh.traverse import MESH
-from raycore.hits import AllHits, Hits, check_fields
+from raycore.hits import AllHits, Hits, SurfaceHits, check_fields
 from raycore.integrations import open3d as _open3d
 from raycore.mesh import Mesh, affine_inverse, affine_product, validate_transform
 from raycore.primitives import analytic, box, cone, cylinder, disk, plane, sphere
@@ -330,14 +330,38 @@ class Scene:
                     **{name: surface[name] for name in fields})
 
     def _shading_normals(self, geom_id, prim_id, u, v, normal):
-        """:func:`raycore.shading.shading_normals` of hits, with the meshes' vertex normals
-        made once per built scene."""
+        """:func:`raycore.shading.shading_normals` of hits."""
+        return shading_normals(self._vertex_normal_tables(), geom_id, prim_id, u, v, normal)
+
+    def _vertex_normal_tables(self):
+        """The built scene's :class:`raycore.shading.NormalTables`, made once per build."""
         record = self._record
         if self._normal_tables is None or self._normal_tables[0] is not record:
             self._normal_tables = (record, NormalTables(
                 self._meshes, self._kind, self._mesh_of, self._xform_row, self._xforms,
                 self.dtype))
-        return shading_normals(self._normal_tables[1], geom_id, prim_id, u, v, normal)
+        return self._normal_tables[1]
+
+    def _surface_hits(self, origins, directions, triangle_test, smooth):
+        """Closest hits, and what a compiled pass over them computes their normals from
+        (:func:`raycore.queries.hit_surface`, :func:`raycore.shading.interpolated_normal`):
+        the render's, which would otherwise write them out and read them back.
+
+        Returns
+        -------
+        SurfaceHits
+            ``tables`` empty unless ``smooth``.
+        """
+        test = triangle_test_code(triangle_test)
+        rays = ray_arrays(origins, directions, 0.0, np.inf, self._kernel_dtype)
+        record = self._scene()
+        first_bad, t, obj, prim, (u, v, slot) = queries.closest_hits(
+            record, rays, test, sphere.PRECISE, barycentrics=True)
+        if first_bad < len(rays[0]):  # the compiled pass refused a ray: say what is wrong
+            refuse(origins, directions, 0.0, np.inf, self.dtype)
+        tables = self._vertex_normal_tables() if smooth else NormalTables(
+            [], [], [], [], [], self.dtype)
+        return SurfaceHits(record, tables.arrays, rays[0], rays[1], t, obj, prim, u, v, slot)
 
     def occluded(self, origins, directions, tmin=0.0, tmax=np.inf, *,
                  triangle_test="watertight", sphere_method="precise"):

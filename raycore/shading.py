@@ -9,6 +9,7 @@ geometric normal.
 import numpy as np
 from numba import njit, prange
 
+from raycore._fp import like
 from raycore._memory import empty_aligned
 from raycore.bvh.traverse import MESH
 
@@ -44,37 +45,46 @@ def vertex_normals(vertices, faces):
     return normals
 
 
+@njit(inline="always")
+def interpolated_normal(tables, g, prim, u, v, nx, ny, nz):
+    """Unit shading normal of a hit on object ``g`` (not a miss), of the precision of its unit
+    geometric normal ``(nx, ny, nz)``: that normal itself unless ``g`` is a mesh.
+
+    ``tables`` is :attr:`NormalTables.arrays`; ``prim``, ``u``, ``v`` the hit's primitive id
+    and barycentrics.  For the passes over closest hits (:func:`shading_normals`, the render's).
+    """
+    kind, mesh_of, xform_row, xforms, face_base, faces, normals = tables
+    if kind[g] != MESH:
+        return nx, ny, nz
+    f = face_base[mesh_of[g]] + prim
+    wa = 1.0 - u - v
+    a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+    sx = wa * normals[a, 0] + u * normals[b, 0] + v * normals[c, 0]
+    sy = wa * normals[a, 1] + u * normals[b, 1] + v * normals[c, 1]
+    sz = wa * normals[a, 2] + u * normals[b, 2] + v * normals[c, 2]
+    r = xform_row[g]
+    if r >= 0:
+        # normals transform by the inverse transpose; xforms hold the inverse (3x4 rows)
+        m = xforms[r]
+        sx, sy, sz = (m[0] * sx + m[4] * sy + m[8] * sz,
+                      m[1] * sx + m[5] * sy + m[9] * sz,
+                      m[2] * sx + m[6] * sy + m[10] * sz)
+    length = np.sqrt(sx * sx + sy * sy + sz * sz)
+    if not length > 0:  # opposite vertex normals cancel: the face's own normal
+        return nx, ny, nz
+    return like(nx, sx / length), like(nx, sy / length), like(nx, sz / length)
+
+
 @njit(cache=True, parallel=True, _nrt=False)
-def _interpolate(geom_id, prim_id, u, v, normal, kind, mesh_of, xform_row, xforms, face_base,
-                 faces, normals, out):
+def _interpolate(tables, geom_id, prim_id, u, v, normal, out):
     for i in prange(len(geom_id)):
         g = geom_id[i]
-        if g < 0 or kind[g] != MESH:
+        if g < 0:
             for k in range(3):
                 out[i, k] = normal[i, k]
             continue
-        f = face_base[mesh_of[g]] + prim_id[i]
-        wb, wc = u[i], v[i]
-        wa = 1.0 - wb - wc
-        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-        nx = wa * normals[a, 0] + wb * normals[b, 0] + wc * normals[c, 0]
-        ny = wa * normals[a, 1] + wb * normals[b, 1] + wc * normals[c, 1]
-        nz = wa * normals[a, 2] + wb * normals[b, 2] + wc * normals[c, 2]
-        r = xform_row[g]
-        if r >= 0:
-            # normals transform by the inverse transpose; xforms hold the inverse (3x4 rows)
-            m = xforms[r]
-            nx, ny, nz = (m[0] * nx + m[4] * ny + m[8] * nz,
-                          m[1] * nx + m[5] * ny + m[9] * nz,
-                          m[2] * nx + m[6] * ny + m[10] * nz)
-        length = np.sqrt(nx * nx + ny * ny + nz * nz)
-        if not length > 0:  # opposite vertex normals cancel: the face's own normal
-            for k in range(3):
-                out[i, k] = normal[i, k]
-            continue
-        out[i, 0] = nx / length
-        out[i, 1] = ny / length
-        out[i, 2] = nz / length
+        out[i, 0], out[i, 1], out[i, 2] = interpolated_normal(
+            tables, g, prim_id[i], u[i], v[i], normal[i, 0], normal[i, 1], normal[i, 2])
 
 
 class NormalTables:
@@ -104,6 +114,9 @@ class NormalTables:
             or [np.zeros((0, 3), np.int64)])
         self.normals = np.concatenate([vertex_normals(m.vertices, m.faces) for m in meshes]
                                       or [np.zeros((0, 3))]).astype(dtype)
+        #: The tables as one argument of compiled code (:func:`interpolated_normal`).
+        self.arrays = (self.kind, self.mesh_of, self.xform_row, self.xforms, self.face_base,
+                       self.faces, self.normals)
 
 
 def shading_normals(tables, geom_id, prim_id, u, v, normal):
@@ -126,6 +139,5 @@ def shading_normals(tables, geom_id, prim_id, u, v, normal):
         Facing as the geometric normal does (vertex normals follow the faces' winding).
     """
     out = empty_aligned(normal.shape, normal.dtype)
-    _interpolate(geom_id, prim_id, u, v, normal, tables.kind, tables.mesh_of, tables.xform_row,
-                 tables.xforms, tables.face_base, tables.faces, tables.normals, out)
+    _interpolate(tables.arrays, geom_id, prim_id, u, v, normal, out)
     return out

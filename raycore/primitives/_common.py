@@ -232,6 +232,15 @@ def azimuth(x, y):
 
 
 @inline_kernel
+def no_uv(x):
+    """``(u, v)`` where a caller asks a shape's surface for its normal only: NaN, of ``x``'s
+    precision.  Left unused, the shapes' own (u, v) were computed all the same: atan2 and acos
+    are library calls, which the compiler does not drop."""
+    nan = like(x, np.nan)
+    return nan, nan
+
+
+@inline_kernel
 def polar_uv(px, py, pz, e1x, e1y, e1z, e2x, e2y, e2z, radius):
     """Polar coordinates of an in-plane offset p: ``u`` = angle from e1 towards e2 / 2π in [0, 1),
     ``v`` = distance / radius in [0, 1]."""

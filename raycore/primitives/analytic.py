@@ -16,9 +16,9 @@ Kernel contract (for callers such as the BVH traversal):
   is in that precision; the direction need not be unit (``t`` is in units of ``|d|``).
   ``method`` is a :data:`SPHERE_METHODS` code, ignored by other shapes.  A NaN in the ray or
   its bounds is a miss; no input gives ``t = NaN`` (rows from ``pack`` hold no NaN).
-* ``analytic_surface(kind, params, ox, oy, oz, dx, dy, dz, t, part) -> (nx, ny, nz, u, v)``:
-  unit outward geometric normal (not flipped towards the ray) and the shape's ``(u, v)``, as
-  documented in each shape module.
+* ``analytic_surface(kind, params, ox, oy, oz, dx, dy, dz, t, part, want_uv) -> (nx, ny, nz,
+  u, v)``: unit outward geometric normal (not flipped towards the ray) and the shape's
+  ``(u, v)``, as documented in each shape module, or NaN unless ``want_uv``.
 * Both are compiled with ``error_model="numpy"``; code that inlines a shape's ``hit`` directly
   must be too (see :data:`~raycore.primitives._common.inline_kernel`).
 * ``pack_<shape>`` are the shape modules' ``pack`` functions under one roof.
@@ -182,22 +182,23 @@ def _analytic_hit(kind, params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
 
 
 @njit(cache=True, error_model="numpy")
-def analytic_surface(kind, params, ox, oy, oz, dx, dy, dz, t, part):
-    """Unit outward normal and ``(u, v)`` at ``o + t d`` on ``part`` of the shape ``kind``."""
+def analytic_surface(kind, params, ox, oy, oz, dx, dy, dz, t, part, want_uv):
+    """Unit outward normal and ``(u, v)`` (NaN unless ``want_uv``) at ``o + t d`` on ``part``
+    of the shape ``kind``."""
     if kind == SPHERE:
-        return sphere.surface(params, ox, oy, oz, dx, dy, dz, t, part)
+        return sphere.surface(params, ox, oy, oz, dx, dy, dz, t, part, want_uv)
     if kind == PLANE:
-        return plane.surface(params, ox, oy, oz, dx, dy, dz, t, part)
+        return plane.surface(params, ox, oy, oz, dx, dy, dz, t, part, want_uv)
     if kind == DISK:
-        return disk.surface(params, ox, oy, oz, dx, dy, dz, t, part)
+        return disk.surface(params, ox, oy, oz, dx, dy, dz, t, part, want_uv)
     if kind == BOX:
-        return box.surface(params, ox, oy, oz, dx, dy, dz, t, part)
+        return box.surface(params, ox, oy, oz, dx, dy, dz, t, part, want_uv)
     if kind == TRANSFORMED_BOX:
-        return box.surface_transformed(params, ox, oy, oz, dx, dy, dz, t, part)
+        return box.surface_transformed(params, ox, oy, oz, dx, dy, dz, t, part, want_uv)
     if kind == CYLINDER:
-        return cylinder.surface(params, ox, oy, oz, dx, dy, dz, t, part)
+        return cylinder.surface(params, ox, oy, oz, dx, dy, dz, t, part, want_uv)
     if kind == CONE:
-        return cone.surface(params, ox, oy, oz, dx, dy, dz, t, part)
+        return cone.surface(params, ox, oy, oz, dx, dy, dz, t, part, want_uv)
     nan = like(ox, np.nan)
     return nan, nan, nan, nan, nan
 
@@ -217,7 +218,8 @@ def _intersect_batch(kind, params, origins, directions, tmin, tmax, method, t_ou
         t_out[i] = t
         part_out[i] = part
         if part >= 0 and (want_normal or want_uv):
-            nx, ny, nz, u, v = analytic_surface(kind, params, ox, oy, oz, dx, dy, dz, t, part)
+            nx, ny, nz, u, v = analytic_surface(kind, params, ox, oy, oz, dx, dy, dz, t, part,
+                                                want_uv)
             if want_normal:
                 normal_out[i, 0] = nx
                 normal_out[i, 1] = ny

@@ -38,6 +38,7 @@ from raycore.primitives._common import (
     in_range,
     inline_kernel,
     miss,
+    no_uv,
     normalized,
     param_row,
     widen,
@@ -197,19 +198,17 @@ def hit(params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
 
 
 @inline_kernel
-def surface(params, ox, oy, oz, dx, dy, dz, t, part):
-    """The face's unit outward normal and face-local ``(u, v)`` of ``o + t d``."""
+def surface(params, ox, oy, oz, dx, dy, dz, t, part, want_uv):
+    """The face's unit outward normal and face-local ``(u, v)`` of ``o + t d`` (:func:`no_uv`
+    unless ``want_uv``)."""
     zero = like(ox, 0.0)
     sign = like(ox, 1.0) if part % 2 == 1 else like(ox, -1.0)
     axis = part // 2
-    u, v = _face_uv(params, ox, oy, oz, dx, dy, dz, t, part)
-    return (
-        sign if axis == 0 else zero,
-        sign if axis == 1 else zero,
-        sign if axis == 2 else zero,
-        u,
-        v,
-    )
+    normal = (sign if axis == 0 else zero, sign if axis == 1 else zero,
+              sign if axis == 2 else zero)
+    if not want_uv:
+        return normal + no_uv(ox)
+    return normal + _face_uv(params, ox, oy, oz, dx, dy, dz, t, part)
 
 
 @inline_kernel
@@ -220,12 +219,13 @@ def hit_transformed(params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
 
 
 @inline_kernel
-def surface_transformed(params, ox, oy, oz, dx, dy, dz, t, part):
+def surface_transformed(params, ox, oy, oz, dx, dy, dz, t, part, want_uv):
     """As :func:`surface`, for the transformed box: world normal, local face coordinates."""
-    lx, ly, lz, ldx, ldy, ldz = _to_local(params, ox, oy, oz, dx, dy, dz)
-    u, v = _face_uv(params, lx, ly, lz, ldx, ldy, ldz, t, part)
     # the inverse transpose maps the local normal ±e_k to ± (row k of the world -> local matrix)
     row = 6 + 4 * (part // 2)
     sign = like(ox, 1.0) if part % 2 == 1 else like(ox, -1.0)
-    nx, ny, nz = normalized(sign * params[row], sign * params[row + 1], sign * params[row + 2])
-    return nx, ny, nz, u, v
+    normal = normalized(sign * params[row], sign * params[row + 1], sign * params[row + 2])
+    if not want_uv:
+        return normal + no_uv(ox)
+    lx, ly, lz, ldx, ldy, ldz = _to_local(params, ox, oy, oz, dx, dy, dz)
+    return normal + _face_uv(params, lx, ly, lz, ldx, ldy, ldz, t, part)

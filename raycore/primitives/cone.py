@@ -41,6 +41,7 @@ from raycore.primitives._common import (
     dot,
     inline_kernel,
     miss,
+    no_uv,
     normalized,
     orthonormal_frame,
     param_row,
@@ -145,23 +146,25 @@ def hit(params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
 
 
 @inline_kernel
-def surface(params, ox, oy, oz, dx, dy, dz, t, part):
-    """Unit outward normal and ``(u, v)`` (see the module docstring) at ``o + t d``."""
+def surface(params, ox, oy, oz, dx, dy, dz, t, part, want_uv):
+    """Unit outward normal and ``(u, v)`` (see the module docstring; :func:`no_uv` unless
+    ``want_uv``) at ``o + t d``."""
     wx, wy, wz = params[6], params[7], params[8]
     s, qx, qy, qz = axial_split(
         (ox - params[3]) + t * dx, (oy - params[4]) + t * dy, (oz - params[5]) + t * dz,
         wx, wy, wz,
     )
+    if part != 0:
+        normal = (-wx, -wy, -wz)
+    else:
+        lean = params[12] * s
+        gx, gy, gz = qx - lean * wx, qy - lean * wy, qz - lean * wz
+        normal = (wx, wy, wz) if dot(gx, gy, gz, gx, gy, gz) == like(ox, 0.0) \
+            else normalized(gx, gy, gz)
+    if not want_uv:
+        return normal + no_uv(ox)
     u, v = polar_uv(
         qx, qy, qz, params[13], params[14], params[15], params[16], params[17], params[18],
         params[10],
     )
-    if part != 0:
-        return -wx, -wy, -wz, u, v
-    lean = params[12] * s
-    gx, gy, gz = qx - lean * wx, qy - lean * wy, qz - lean * wz
-    v = clamp01(like(ox, 1.0) + s / params[9])
-    if dot(gx, gy, gz, gx, gy, gz) == like(ox, 0.0):
-        return wx, wy, wz, u, v
-    nx, ny, nz = normalized(gx, gy, gz)
-    return nx, ny, nz, u, v
+    return normal + (u, clamp01(like(ox, 1.0) + s / params[9]) if part == 0 else v)

@@ -37,6 +37,7 @@ from raycore.primitives._common import (
     dot,
     inline_kernel,
     miss,
+    no_uv,
     normalized,
     orthonormal_frame,
     param_row,
@@ -103,18 +104,22 @@ def hit(params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
 
 
 @inline_kernel
-def surface(params, ox, oy, oz, dx, dy, dz, t, part):
-    """Unit outward normal and ``(u, v)`` (see the module docstring) at ``o + t d``."""
+def surface(params, ox, oy, oz, dx, dy, dz, t, part, want_uv):
+    """Unit outward normal and ``(u, v)`` (see the module docstring; :func:`no_uv` unless
+    ``want_uv``) at ``o + t d``."""
     s, qx, qy, qz = axial_split(
         (ox - params[0]) + t * dx, (oy - params[1]) + t * dy, (oz - params[2]) + t * dz,
         params[6], params[7], params[8],
     )
+    if part == 0:
+        normal = normalized(qx, qy, qz)
+    else:
+        sign = like(ox, 1.0) if part == 2 else like(ox, -1.0)
+        normal = (sign * params[6], sign * params[7], sign * params[8])
+    if not want_uv:
+        return normal + no_uv(ox)
     u, v = polar_uv(
         qx, qy, qz, params[12], params[13], params[14], params[15], params[16], params[17],
         params[10],
     )
-    if part == 0:
-        nx, ny, nz = normalized(qx, qy, qz)
-        return nx, ny, nz, u, clamp01(s / params[9])
-    sign = like(ox, 1.0) if part == 2 else like(ox, -1.0)
-    return sign * params[6], sign * params[7], sign * params[8], u, v
+    return normal + (u, clamp01(s / params[9]) if part == 0 else v)

@@ -25,6 +25,7 @@ from raycore.primitives._common import (
     in_range,
     inline_kernel,
     miss,
+    no_uv,
     orthonormal_frame,
     param_row,
     polar_uv,
@@ -80,8 +81,11 @@ def hit(params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
 
 
 @inline_kernel
-def surface(params, ox, oy, oz, dx, dy, dz, t, part):
-    """The disk's unit normal and polar ``(u, v)`` of ``o + t d``."""
+def surface(params, ox, oy, oz, dx, dy, dz, t, part, want_uv):
+    """The disk's unit normal and polar ``(u, v)`` of ``o + t d`` (:func:`no_uv` unless
+    ``want_uv``)."""
+    if not want_uv:
+        return (params[6], params[7], params[8]) + no_uv(ox)
     u, v = polar_uv(
         (ox - params[0]) + t * dx, (oy - params[1]) + t * dy, (oz - params[2]) + t * dz,
         params[11], params[12], params[13], params[14], params[15], params[16], params[9],

@@ -26,6 +26,7 @@ from raycore.primitives._common import (
     in_range,
     inline_kernel,
     miss,
+    no_uv,
     orthonormal_frame,
     param_row,
 )
@@ -71,8 +72,11 @@ def hit(params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
 
 
 @inline_kernel
-def surface(params, ox, oy, oz, dx, dy, dz, t, part):
-    """The plane's unit normal and the frame coordinates ``(u, v)`` of ``o + t d``."""
+def surface(params, ox, oy, oz, dx, dy, dz, t, part, want_uv):
+    """The plane's unit normal and the frame coordinates ``(u, v)`` of ``o + t d``
+    (:func:`no_uv` unless ``want_uv``)."""
+    if not want_uv:
+        return (params[6], params[7], params[8]) + no_uv(ox)
     qx = (ox - params[0]) + t * dx
     qy = (oy - params[1]) + t * dy
     qz = (oz - params[2]) + t * dz

@@ -33,6 +33,7 @@ from raycore.primitives._common import (
     dot,
     inline_kernel,
     miss,
+    no_uv,
     normalized,
     param_row,
     precise_discriminant,
@@ -128,8 +129,9 @@ def hit(params, ox, oy, oz, dx, dy, dz, tmin, tmax, method):
 
 
 @inline_kernel
-def surface(params, ox, oy, oz, dx, dy, dz, t, part):
-    """Unit outward normal and ``(u, v)`` (see the module docstring) at ``o + t d``."""
+def surface(params, ox, oy, oz, dx, dy, dz, t, part, want_uv):
+    """Unit outward normal and ``(u, v)`` (see the module docstring; :func:`no_uv` unless
+    ``want_uv``) at ``o + t d``."""
     # offset from the centre as (o - c) + t d: no cancellation of large coordinates
     ex = (ox - params[0]) + t * dx
     ey = (oy - params[1]) + t * dy
@@ -139,6 +141,8 @@ def surface(params, ox, oy, oz, dx, dy, dz, t, part):
         # the surface the ray met faces it
         ex, ey, ez = -dx, -dy, -dz
     nx, ny, nz = normalized(ex, ey, ez)
+    if not want_uv:
+        return (nx, ny, nz) + no_uv(nx)
     u = azimuth(nx, ny)
     v = math.acos(min(max(nz, like(nz, -1.0)), like(nz, 1.0))) / like(nz, math.pi)
     return nx, ny, nz, u, clamp01(v)

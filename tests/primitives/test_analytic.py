@@ -110,7 +110,7 @@ def test_nan_in_parameters_never_gives_nan(name, dtype):
 def test_unknown_kind():
     ray = hitting_ray("sphere", np.float64)
     assert analytic.analytic_hit(99, row("sphere", np.float64), *ray, 0) == (np.inf, -1)
-    surface = analytic.analytic_surface(99, row("sphere", np.float64), *ray[:6], 1.0, 0)
+    surface = analytic.analytic_surface(99, row("sphere", np.float64), *ray[:6], 1.0, 0, True)
     assert np.all(np.isnan(surface))
     with pytest.raises(ValueError, match="kind"):
         analytic.analytic_bounds(99, row("sphere", np.float64))
@@ -140,7 +140,7 @@ def test_float32_kernels_compute_in_float32_only():
     surface = njit(error_model="numpy")(analytic.analytic_surface.py_func)
     ray = hitting_ray("sphere", np.float32)
     hit(0, row("sphere", np.float32), *ray, 0)
-    surface(0, row("sphere", np.float32), *ray[:6], np.float32(1), 0)
+    surface(0, row("sphere", np.float32), *ray[:6], np.float32(1), 0, True)
     assert "double" not in _core_llvm(hit)
     assert "double" not in _core_llvm(surface)
 
@@ -167,7 +167,8 @@ def test_batch_agrees_with_the_scalar_kernel_and_fills_hits(name, dtype):
         assert t == hits.t[i]
         if part >= 0:
             # a float32 t comes back from Numba as a Python float: restore its precision
-            surface = analytic.analytic_surface(kind, params, *o[i], *d[i], o.dtype.type(t), part)
+            surface = analytic.analytic_surface(kind, params, *o[i], *d[i], o.dtype.type(t), part,
+                                                True)
             np.testing.assert_array_equal(surface, [*hits.normal[i], *hits.uv[i]])
     plain = function(origins, directions, *arguments, dtype=dtype)
     assert plain.normal is None and plain.uv is None
