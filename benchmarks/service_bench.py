@@ -79,7 +79,8 @@ def floor_under(lo, hi):
 
 
 class TimedScene:
-    """A Scene whose ``intersect`` and ``occluded`` calls add up their wall time."""
+    """A Scene whose tracing calls add up their wall time: ``intersect``, ``occluded`` and the
+    closest-hit pass that a lambert render makes (``_surface_hits``)."""
 
     def __init__(self, scene):
         self.scene = scene
@@ -102,6 +103,9 @@ class TimedScene:
 
     def occluded(self, *args, **kwargs):
         return self._timed(self.scene.occluded, *args, **kwargs)
+
+    def _surface_hits(self, *args, **kwargs):
+        return self._timed(self.scene._surface_hits, *args, **kwargs)
 
 
 def server_timing(headers):
