@@ -169,8 +169,7 @@ def _restore(Scene, meta, arrays):
         vertices = take(f"mesh{i}.vertices", np.float64, (None, 3))
         faces = take(f"mesh{i}.faces", np.int64, (None, 3))
         blocks = take(f"mesh{i}.blocks", dtype, (None, block_width(dtype)))
-        problem = _mesh_problem(vertices, faces,
-                                face_ints(blocks)[:, FACE_COLUMN:FACE_COLUMN + lanes])
+        problem = _mesh_problem(vertices, faces, face_ints(blocks), lanes)
         if problem:
             what = _MESH_PROBLEMS[problem].format(vertices=len(vertices), faces=len(faces))
             raise ValueError(f"the scene file is corrupt (mesh {i}: {what})")
@@ -286,7 +285,7 @@ _MESH_PROBLEMS = {
 
 
 @njit(cache=True)
-def _mesh_problem(vertices, faces, slot_faces):
+def _mesh_problem(vertices, faces, block_ints, lanes):
     """0, or the key in _MESH_PROBLEMS of the first problem found with a stored mesh, in one
     pass over each array: what :class:`raycore.mesh.Mesh` requires of its arrays (a rebuild
     reads vertices by the faces), and leaf blocks whose face indices (-1 in padding lanes)
@@ -296,8 +295,14 @@ def _mesh_problem(vertices, faces, slot_faces):
     ----------
     vertices : ndarray of float64, shape (V, 3)
     faces : ndarray of int64, shape (F, 3)
-    slot_faces : ndarray of int32, shape (B, L)
-        The face index of each lane of each leaf block.
+    block_ints : ndarray of int32, shape (B, BLOCK_PLANES * VECTOR_BYTES / 4)
+        The leaf blocks viewed as int32 (:func:`raycore.bvh.leaves.face_ints`): the face index
+        of lane ``lane`` of block ``b`` is at ``[b, FACE_COLUMN + lane]``.  The whole view, not
+        the face columns' slice: a slice of one block's row is C-contiguous and of several is
+        not, which Numba types apart, and a file's one-block mesh compiled this function again
+        at run time (the container test caught it).
+    lanes : int
+        Triangles per block.
     """
     # loops over indices, without an early exit, that LLVM vectorises: iterating the arrays
     # took twice as long (1.04 against 0.52 ms for 2.4M coordinates)
@@ -317,9 +322,9 @@ def _mesh_problem(vertices, faces, slot_faces):
     if top >= np.uint64(len(vertices)):
         return 3
     top = np.uint64(0)
-    for row in range(slot_faces.shape[0]):
-        for lane in range(slot_faces.shape[1]):
-            top = max(top, np.uint64(np.int64(slot_faces[row, lane]) + 1))
+    for row in range(block_ints.shape[0]):
+        for lane in range(FACE_COLUMN, FACE_COLUMN + lanes):
+            top = max(top, np.uint64(np.int64(block_ints[row, lane]) + 1))
     if top > np.uint64(len(faces)):
         return 4
     return 0

@@ -298,3 +298,18 @@ def test_threaded_read_in_pieces(saved, tmp_path, monkeypatch, cut):
     got = answers(Scene.load(path), rays)
     for name, value in expected.items():
         np.testing.assert_array_equal(got[name], value, err_msg=name)
+
+
+def test_loading_compiles_one_mesh_check_for_every_mesh(tmp_path):
+    """A mesh of one leaf block and one of many, in both dtypes, reach the same compiled mesh
+    check: a service that loads scenes from its data directory compiles nothing that
+    ``raycore warmup`` did not (a one-block mesh's face columns, sliced, were typed apart)."""
+    bunny = shared_mesh("stanford-bunny")
+    for dtype in ("float32", "float64"):
+        for vertices, faces in (([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]),
+                                (bunny.vertices, bunny.faces)):
+            scene = Scene(dtype)
+            scene.add_mesh(vertices, faces)
+            scene.save(tmp_path / "one.rcs")
+            Scene.load(tmp_path / "one.rcs")
+    assert len(scene_file._mesh_problem.signatures) == 1
