@@ -20,7 +20,7 @@ from raycore.bvh.leaves import FACE_COLUMN, face_ints
 from raycore.bvh.simd import BLOCK_PLANES, VECTOR_BYTES, block_width, lanes_for
 from raycore.bvh.traverse import MESH
 from raycore.bvh.validate import check_tree
-from raycore.mesh import Mesh
+from raycore.mesh import Mesh, indices_outside
 from raycore.primitives import analytic
 
 #: The BVH layout the stored trees are in; a file made for another is refused (rebuild it).
@@ -258,22 +258,13 @@ def _object_problem(kind, param_row, mesh_of, xform_row, param_rows, xform_rows,
             return 3
         if mesh_of[i] != -1 or xform_row[i] != -1:
             return 5
-    if _outside(placed, n):
+    if indices_outside(placed, n):
         return 6
-    if _outside(top_slots, n):
+    if indices_outside(top_slots, n):
         return 7
-    if _outside(direct, n):
+    if indices_outside(direct, n):
         return 8
     return 0
-
-
-@njit(cache=True)
-def _outside(indices, n):
-    """Whether any of ``indices`` (int64) lies outside [0, n)."""
-    for i in range(len(indices)):
-        if indices[i] < 0 or indices[i] >= n:
-            return True
-    return False
 
 
 _MESH_PROBLEMS = {
@@ -314,12 +305,7 @@ def _mesh_problem(vertices, faces, block_ints, lanes):
         finite &= np.isfinite(coordinates[i])
     if not finite:
         return 2
-    # one comparison for both ends: a negative index taken as unsigned is past any vertex
-    indices = faces.reshape(-1).view(np.uint64)
-    top = np.uint64(0)
-    for i in range(len(indices)):
-        top = max(top, indices[i])
-    if top >= np.uint64(len(vertices)):
+    if indices_outside(faces.reshape(-1), len(vertices)):
         return 3
     top = np.uint64(0)
     for row in range(block_ints.shape[0]):
