@@ -309,13 +309,8 @@ class Scene:
         Hits
         """
         fields = check_fields(fields) if fields else ()
-        test = triangle_test_code(triangle_test)
-        method = analytic.sphere_method_code(sphere_method)
-        rays = ray_arrays(origins, directions, tmin, tmax, self._kernel_dtype)
-        first_bad, t, obj, prim, surface = queries.closest_hits(
-            self._scene(), rays, test, method, barycentrics=bool(fields))
-        if first_bad < len(rays[0]):  # the compiled pass refused a ray: say what is wrong
-            refuse(origins, directions, tmin, tmax, self.dtype)
+        rays, t, obj, prim, surface = self._closest_hits(
+            origins, directions, tmin, tmax, triangle_test, sphere_method, bool(fields))
         if not fields:
             return Hits(t, obj, prim)
         u, v, slot = surface
@@ -328,6 +323,20 @@ class Scene:
             surface["shading_normal"] = self._shading_normals(obj, prim, u, v, normal)
         return Hits(t=t, geom_id=obj, prim_id=prim,
                     **{name: surface[name] for name in fields})
+
+    def _closest_hits(self, origins, directions, tmin, tmax, triangle_test, sphere_method,
+                      barycentrics):
+        """``(rays, t, obj, prim, (u, v, slot))``: the rays as the kernels take them and
+        :func:`raycore.queries.closest_hits` of them (the last item empty unless
+        ``barycentrics``); a ValueError naming what is wrong with a ray it refused."""
+        test = triangle_test_code(triangle_test)
+        method = analytic.sphere_method_code(sphere_method)
+        rays = ray_arrays(origins, directions, tmin, tmax, self._kernel_dtype)
+        first_bad, t, obj, prim, surface = queries.closest_hits(
+            self._scene(), rays, test, method, barycentrics=barycentrics)
+        if first_bad < len(rays[0]):  # the compiled pass refused a ray: say what is wrong
+            refuse(origins, directions, tmin, tmax, self.dtype)
+        return rays, t, obj, prim, surface
 
     def _shading_normals(self, geom_id, prim_id, u, v, normal):
         """:func:`raycore.shading.shading_normals` of hits."""
@@ -352,16 +361,12 @@ class Scene:
         SurfaceHits
             ``tables`` empty unless ``smooth``.
         """
-        test = triangle_test_code(triangle_test)
-        rays = ray_arrays(origins, directions, 0.0, np.inf, self._kernel_dtype)
-        record = self._scene()
-        first_bad, t, obj, prim, (u, v, slot) = queries.closest_hits(
-            record, rays, test, sphere.PRECISE, barycentrics=True)
-        if first_bad < len(rays[0]):  # the compiled pass refused a ray: say what is wrong
-            refuse(origins, directions, 0.0, np.inf, self.dtype)
+        rays, t, obj, prim, (u, v, slot) = self._closest_hits(
+            origins, directions, 0.0, np.inf, triangle_test, "precise", True)
         tables = self._vertex_normal_tables() if smooth else NormalTables(
             [], [], [], [], [], self.dtype)
-        return SurfaceHits(record, tables.arrays, rays[0], rays[1], t, obj, prim, u, v, slot)
+        return SurfaceHits(self._record, tables.arrays, rays[0], rays[1], t, obj, prim, u, v,
+                           slot)
 
     def occluded(self, origins, directions, tmin=0.0, tmax=np.inf, *,
                  triangle_test="watertight", sphere_method="precise"):
