@@ -68,7 +68,8 @@ load: $(VENV)/.dev-installed
 # raycore against Open3D and embreex, each library's own call timed (benchmarks/run.py: every
 # shared mesh and nefertiti subdivided to 1.6M and 6.4M triangles, build time and memory, one
 # thread against serial Embree); time per call from 1 to 1M rays (benchmarks/latency.py, with
-# docs/latency.png); the HTTP service against in-process calls.  About 15 minutes on 2 cores;
+# docs/latency.png); the HTTP service against in-process calls; compile times, cold and warm,
+# and the time to a first answer (benchmarks/compile_time.py).  About 20 minutes on 2 cores;
 # BENCH_ARGS=--no-large skips the large meshes, BENCH_ARGS=--quick is a smoke run.
 BENCH_ARGS ?=
 bench: $(VENV)/.bench-installed
@@ -78,6 +79,7 @@ bench: $(VENV)/.bench-installed
 	$(BIN)/python -m benchmarks.service_bench $(filter --quick,$(BENCH_ARGS))
 	$(BIN)/python -m benchmarks.scene_file $(filter --no-large,$(BENCH_ARGS))
 	$(BIN)/python -m benchmarks.dask_bench
+	$(BIN)/python -m benchmarks.compile_time
 
 # docs/speed-vs-accuracy.png and docs/model-what-you-need.png with their Markdown tables
 # (benchmarks/speed_accuracy.py).  The error figures come from tests/stability's catalogue and
