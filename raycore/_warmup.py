@@ -59,6 +59,8 @@ def warm_up(dtypes=DTYPES, report=print):
         everything = _everything_scene(dtype)
         _ray_forms(everything)
         _renders(everything)
+        # a scene without shapes has kernels of its own (raycore.primitives.analytic.table_hit)
+        _renders(_meshes_scene(dtype))
         _offsets(everything)
         _loaded(everything)
         _large_build(dtype)
@@ -113,6 +115,12 @@ def _add_meshes(scene):
     scene.add_instance(box, turned)
 
 
+def _meshes_scene(dtype):
+    scene = Scene(dtype=dtype)
+    _add_meshes(scene)
+    return scene
+
+
 def _everything_scene(dtype):
     scene = Scene(dtype=dtype)
     _add_shapes(scene)
@@ -124,8 +132,9 @@ def _large_build(dtype):
     """Build a mesh large enough for every path of the parallel build (its top levels are
     split on all cores, more than MIN_TASK triangles, and its subtrees are built and collapsed
     as tasks) and for batches traced in a coherent order (a tree of GROUP_TREE_BYTES or more),
-    and query it with such batches.  Small meshes reach none of those kernels, and an upload of a
-    large one would compile them in the service."""
+    and query it with such batches, alone and beside a shape (a scene without shapes has kernels
+    of its own).  Small meshes reach none of those kernels, and an upload of a large one would
+    compile them in the service."""
     # a full leaf block holds eight float32 or four float64 triangles in 288 bytes: 36 bytes
     # a triangle, and the wide rows come on top
     triangles = max(MIN_TASK, GROUP_TREE_BYTES // 36)
@@ -133,14 +142,15 @@ def _large_build(dtype):
     scene = Scene(dtype=dtype)
     scene.add_mesh(*_grid_mesh(size))
     _query_everything(scene, (GROUPED_BATCH,))
+    scene.add_sphere([0.0, 0.0, 0.0], 1.0)  # the mesh's tree is kept: only the top is built
+    _query_everything(scene, (GROUPED_BATCH,))
 
 
 def _scenes(dtype):
     """Scenes of every composition: all kinds, meshes only, shapes only, one mesh, one shape.
     The first is queried before it is built (a query builds it), the others after."""
     yield _everything_scene(dtype)
-    meshes = Scene(dtype=dtype)
-    _add_meshes(meshes)
+    meshes = _meshes_scene(dtype)
     shapes = Scene(dtype=dtype)
     _add_shapes(shapes)
     one_mesh = Scene(dtype=dtype)

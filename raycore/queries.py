@@ -496,6 +496,17 @@ def surface_fields(record, origins, directions, t, obj, slot, u, v, want_uv, wan
 _analytic_surface_inline = njit(error_model="numpy", forceinline=True)(analytic_surface.py_func)
 
 
+@njit(error_model="numpy", forceinline=True)
+def _table_surface(params, row, kind, ox, oy, oz, dx, dy, dz, t, part, want_uv):
+    """:func:`_analytic_surface_inline` of the shape in row ``row`` of a scene's parameter table
+    ``params``; NaN where the scene holds no shapes (``params`` None), which compiles the shapes'
+    code away, as :func:`raycore.primitives.analytic.table_hit` does."""
+    if params is None:
+        nan = like(ox, np.nan)
+        return nan, nan, nan, nan, nan
+    return _analytic_surface_inline(kind, params[row], ox, oy, oz, dx, dy, dz, t, part, want_uv)
+
+
 @njit(cache=True)
 def _fill_surface_fields(record, origins, directions, t, obj, slot, u, v, uv, normal, point):
     _surface_fields(arrays_of(record), origins, directions, t, obj, slot, u, v, uv, normal, point)
@@ -543,8 +554,8 @@ def hit_surface(scene, origins, directions, t, obj, slot, u, v, i, want_normal, 
     real = t[i]  # of the rays' precision
     k = scene.kind[obj[i]]
     if k != MESH:
-        nx, ny, nz, su, sv = _analytic_surface_inline(
-            k, scene.params[scene.param_row[obj[i]]], origins[i, 0], origins[i, 1],
+        nx, ny, nz, su, sv = _table_surface(
+            scene.params, scene.param_row[obj[i]], k, origins[i, 0], origins[i, 1],
             origins[i, 2], directions[i, 0], directions[i, 1], directions[i, 2], t[i], slot[i],
             want_uv)
         return like(real, nx), like(real, ny), like(real, nz), like(real, su), like(real, sv)

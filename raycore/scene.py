@@ -239,7 +239,9 @@ class Scene:
             top_nodes, top_nodes.view(np.int32), self._top_slots, self._direct,
             np.array(self._kind, np.int64), np.array(self._param_row, np.int64),
             np.array(self._mesh_of, np.int64), np.array(self._xform_row, np.int64),
-            np.array(self._params, dtype=dtype).reshape(-1, analytic.PARAM_WIDTH),
+            # None without shapes: their code then compiles away (analytic.table_hit)
+            np.array(self._params, dtype=dtype).reshape(-1, analytic.PARAM_WIDTH)
+            if self._params else None,
             np.array(self._xforms, dtype=dtype).reshape(-1, 12),
             mesh_nodes, mesh_nodes.view(np.int32),
             all_blocks,

@@ -20,7 +20,8 @@ FIELDS = (
     # of each leaf slot, and the objects tested before it (unbounded ones, or a lone object)
     "top_nodes", "top_refs", "top_order", "direct",
     # per object: kind, analytic parameter row, mesh, inverse-transform row (-1: none); the
-    # (P, PARAM_WIDTH) parameter table and the (T, 12) object-from-world matrices
+    # (P, PARAM_WIDTH) parameter table (None in a scene without shapes) and the (T, 12)
+    # object-from-world matrices
     "kind", "param_row", "mesh_of", "xform_row", "params", "xforms",
     # every mesh's wide rows and leaf blocks (raycore.bvh.leaves), concatenated, with each
     # mesh's first row and first block

@@ -38,7 +38,7 @@ from raycore.bvh.simd import (
     prefetch_row,
     watertight_block,
 )
-from raycore.primitives.analytic import DISK, PLANE, analytic_hit
+from raycore.primitives.analytic import DISK, PLANE, table_hit
 from raycore.primitives.triangle import WATERTIGHT, triangle_hit, watertight_setup
 
 CLOSEST, ANY, COUNT, ALL, PARITY, LIST = 0, 1, 2, 3, 4, 5
@@ -439,8 +439,8 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
                     continue
                 t_from = tmin
                 for _ in range(MAX_ANALYTIC_HITS if mode >= COUNT else 1):
-                    t, part = analytic_hit(k, scene.params[scene.param_row[obj]], ox, oy, oz,
-                                           dx, dy, dz, t_from, best_t, sphere_method)
+                    t, part = table_hit(scene.params, scene.param_row[obj], k, ox, oy, oz, dx,
+                                        dy, dz, t_from, best_t, sphere_method)
                     if t == np.inf:
                         break
                     if mode >= COUNT:

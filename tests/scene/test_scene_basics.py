@@ -1,7 +1,9 @@
 """Scene odds and ends: empty scenes, no rays, changes after a query, result types, bounds."""
 
+import numba
 import numpy as np
 import pytest
+from numba import types
 
 from raycore import AllHits, Hits, Scene, queries
 from raycore.bvh.traverse import HIT_CAPACITY
@@ -24,6 +26,22 @@ def test_an_empty_scene_misses_everything(dtype):
     # invisible prototypes alone show nothing either
     scene.add_mesh([[0, 0, 1], [1, 0, 1], [0, 1, 1]], [[0, 1, 2]], visible=False)
     assert np.all(scene.intersect(*RAYS).geom_id == -1)
+
+
+def test_a_scene_without_shapes_hands_its_kernels_no_parameter_table(dtype):
+    # so that Numba compiles the shapes' code away for it (raycore.primitives.analytic.table_hit)
+    scene = Scene(dtype=dtype)
+    scene.add_mesh([[0, 0, 2], [1, 0, 2], [0, 1, 2]], [[0, 1, 2]])
+    origins = np.zeros((2, 3))
+    directions = np.array([[0.1, 0.1, 1.0], [0.0, 0.0, -1.0]])
+    meshes_only = scene.intersect(origins, directions, fields=("normal",))
+    assert numba.typeof(scene._record).field_dict["params"] == types.none
+    scene.add_sphere([0, 0, -3], 1.0)
+    both = scene.intersect(origins, directions, fields=("normal",))
+    assert isinstance(numba.typeof(scene._record).field_dict["params"], types.Array)
+    assert meshes_only.geom_id.tolist() == [0, -1] and both.geom_id.tolist() == [0, 1]
+    assert both.t[0] == meshes_only.t[0] == np.float32(2) and both.t[1] == pytest.approx(2)
+    assert both.normal[1] == pytest.approx([0, 0, 1])
 
 
 def test_no_rays_give_empty_results(dtype):
