@@ -19,7 +19,7 @@ from numba import get_num_threads, get_thread_id, njit, parallel_chunksize, pran
 from raycore._fp import like
 from raycore._memory import empty_aligned
 from raycore.bvh.leaves import slot_value
-from raycore.bvh.record import arrays_of
+from raycore.bvh.record import arrays_of, tabled_arrays_of
 from raycore.bvh.traverse import (
     ALL,
     ANY,
@@ -99,8 +99,8 @@ def _trace_in_parallel(record, mode, test, sphere_method, origins, directions, t
                        out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t,
                        hits_obj, hits_prim, int_scratch, real_scratch, capacity, size):
     first_bad = np.empty((len(origins) + size - 1) // size, np.int64)
-    _trace_parallel(arrays_of(record), mode, test, sphere_method, origins, directions, tmin,
-                    tmax, out_t, out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets,
+    _trace_parallel(tabled_arrays_of(record), mode, test, sphere_method, origins, directions,
+                    tmin, tmax, out_t, out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets,
                     hits_t, hits_obj, hits_prim, int_scratch, real_scratch, capacity, size,
                     first_bad)
     return first_bad.min()
@@ -509,7 +509,8 @@ def _table_surface(params, row, kind, ox, oy, oz, dx, dy, dz, t, part, want_uv):
 
 @njit(cache=True)
 def _fill_surface_fields(record, origins, directions, t, obj, slot, u, v, uv, normal, point):
-    _surface_fields(arrays_of(record), origins, directions, t, obj, slot, u, v, uv, normal, point)
+    _surface_fields(tabled_arrays_of(record), origins, directions, t, obj, slot, u, v, uv, normal,
+                    point)
 
 
 @njit(cache=True, parallel=True, error_model="numpy", _nrt=False)

@@ -19,7 +19,7 @@ from numba import njit, prange, vectorize
 
 from raycore._fp import like
 from raycore._memory import empty_aligned
-from raycore.bvh.record import arrays_of
+from raycore.bvh.record import tabled_arrays_of
 from raycore.camera import strata
 from raycore.offset import offset_constants, offset_coordinate
 from raycore.queries import hit_surface
@@ -347,8 +347,8 @@ def _light_pass(record, tables, origins, directions, t, geom_id, prim_id, u, v, 
                 light, error_eps, near, float_scale, int_scale, chunk, cosine, lit_origins,
                 counts):
     """:func:`_light_items` on a scene record's arrays."""
-    _light_items(arrays_of(record), tables, origins, directions, t, geom_id, prim_id, u, v,
-                 slot, smooth, light, error_eps, near, float_scale, int_scale, chunk, cosine,
+    _light_items(tabled_arrays_of(record), tables, origins, directions, t, geom_id, prim_id, u,
+                 v, slot, smooth, light, error_eps, near, float_scale, int_scale, chunk, cosine,
                  lit_origins, counts)
 
 

@@ -235,17 +235,18 @@ class Scene:
         blocks = [m.leaf_blocks for m in self._meshes]
         mesh_nodes = _joined([m.bvh.nodes for m in self._meshes]) if blocks else empty_nodes
         all_blocks = _joined(blocks) if blocks else empty_blocks(0, dtype)
+        table = np.array(self._params, dtype=dtype).reshape(-1, analytic.PARAM_WIDTH)
         record = SceneRecord(
             top_nodes, top_nodes.view(np.int32), self._top_slots, self._direct,
             np.array(self._kind, np.int64), np.array(self._param_row, np.int64),
             np.array(self._mesh_of, np.int64), np.array(self._xform_row, np.int64),
             # None without shapes: their code then compiles away (analytic.table_hit)
-            np.array(self._params, dtype=dtype).reshape(-1, analytic.PARAM_WIDTH)
-            if self._params else None,
+            table if len(table) else None,
             np.array(self._xforms, dtype=dtype).reshape(-1, 12),
             mesh_nodes, mesh_nodes.view(np.int32),
             all_blocks,
             _starts([len(m.bvh.nodes) for m in self._meshes]), _starts([len(b) for b in blocks]),
+            table,
         )
         record.tree_bytes = top_nodes.nbytes + mesh_nodes.nbytes + all_blocks.nbytes
         record.entry_points = {}
