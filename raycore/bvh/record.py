@@ -56,13 +56,19 @@ structref.define_proxy(SceneRecord, SceneRecordType, list(RECORD_FIELDS))
 SceneArrays = namedtuple("SceneArrays", FIELDS)
 
 
+@njit(cache=True, inline="always")
+def _arrays(scene, table):
+    """The :data:`SceneArrays` of record ``scene``, with ``table`` as the parameter table."""
+    return SceneArrays(
+        scene.top_nodes, scene.top_refs, scene.top_order, scene.direct,
+        scene.kind, scene.param_row, scene.mesh_of, scene.xform_row, table, scene.xforms,
+        scene.mesh_nodes, scene.mesh_refs, scene.blocks, scene.node_base, scene.block_base)
+
+
 @njit(cache=True)
 def arrays_of(scene):
     """The :data:`SceneArrays` of a :class:`SceneRecord` (inside compiled code)."""
-    return SceneArrays(
-        scene.top_nodes, scene.top_refs, scene.top_order, scene.direct,
-        scene.kind, scene.param_row, scene.mesh_of, scene.xform_row, scene.params, scene.xforms,
-        scene.mesh_nodes, scene.mesh_refs, scene.blocks, scene.node_base, scene.block_base)
+    return _arrays(scene, scene.params)
 
 
 @njit(cache=True)
@@ -76,7 +82,4 @@ def tabled_arrays_of(scene):
     compiled without the shapes, the parallel traversal ran float64 camera rays 4-5 % slower
     (one thread, stanford-bunny and nefertiti, seven alternating processes).
     """
-    return SceneArrays(
-        scene.top_nodes, scene.top_refs, scene.top_order, scene.direct,
-        scene.kind, scene.param_row, scene.mesh_of, scene.xform_row, scene.table, scene.xforms,
-        scene.mesh_nodes, scene.mesh_refs, scene.blocks, scene.node_base, scene.block_base)
+    return _arrays(scene, scene.table)
