@@ -122,25 +122,16 @@ def _first_answer(build_first):
 
 def _child(mode):
     """Run one measurement in this process and print its figures as JSON."""
+    compiles = _CompileClock()
+    loads = _LoadClock() if mode == "warm" else None
     figures = {}
-    if mode == "answer-build":
-        compiles = _CompileClock()
-        figures.update(_first_answer(True))
-    elif mode == "answer-intersect":
-        compiles = _CompileClock()
-        figures.update(_first_answer(False))
-    elif mode == "warmup":
-        compiles = _CompileClock()
+    if mode != "warmup":  # warm: the script again, then the warm-up, on warmup's cache
+        figures.update(_first_answer(build_first=mode != "answer-intersect"))
+    if mode in ("warmup", "warm"):
         from raycore._warmup import warm_up
 
         figures["warmup_s"] = warm_up(("float32",), report=lambda line: None)
-    else:  # warm: the cache that warmup filled
-        compiles = _CompileClock()
-        loads = _LoadClock()
-        figures.update(_first_answer(True))
-        from raycore._warmup import warm_up
-
-        figures["warmup_s"] = warm_up(("float32",), report=lambda line: None)
+    if loads is not None:
         figures["load_s"] = dict(loads.seconds)
     figures["compile_s"] = dict(compiles.seconds)
     print(json.dumps(figures))

@@ -169,9 +169,9 @@ class Mesh:
         :mod:`raycore.scene_file` stored them, in place of building one.
 
         The caller has checked the arrays (``raycore.scene_file._mesh_problem``, with
-        :func:`indices_outside` as here): ``vertices``
-        (V, 3) float64, finite; ``faces`` (F, 3) int64 in [0, V), F > 0; both C-ordered.  The
-        checks of ``__init__``, which take any array_like, are not repeated.
+        :func:`indices_outside` as here): ``vertices`` (V, 3) float64, finite; ``faces`` (F, 3)
+        int64 in [0, V), F > 0; both C-ordered.  The checks of ``__init__``, which take any
+        array_like, are not repeated.
         """
         mesh = cls.__new__(cls)
         mesh._set(vertices, faces)
