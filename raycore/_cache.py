@@ -4,14 +4,16 @@ Numba's cache (``cache=True``, stored in ``__pycache__`` beside each module) is 
 modification time of the decorated function's own file only.  A kernel that inlines code from
 another module (the traversal inlines every primitive) is therefore reloaded stale after that
 other module changes.  At import, raycore hashes its sources and, when they differ from the ones
-the cache was built from, drops its cached kernels so that they are compiled afresh.
+the cache was built from, drops its cached kernels so that they are compiled afresh.  The test
+suite does the same for its own kernels, which inline raycore's (``tests/conftest.py``).
 """
 
 import hashlib
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent
-STAMP = PACKAGE / "__pycache__" / "kernel-sources.sha256"
+#: The digest of the sources that a folder's cached kernels were compiled from, beside them.
+STAMP_NAME = "kernel-sources.sha256"
 
 
 def sources_digest():
@@ -23,19 +25,21 @@ def sources_digest():
     return digest.hexdigest()
 
 
-def drop_stale_kernels():
-    """Delete the cached kernels if they were compiled from other sources than these."""
+def drop_stale_kernels(folder=PACKAGE):
+    """Delete the kernels cached under ``folder`` (raycore's by default) if they were compiled
+    from other raycore sources than these."""
     digest = sources_digest()
+    stamp = folder / "__pycache__" / STAMP_NAME
     try:
-        if STAMP.read_text() == digest:
+        if stamp.read_text() == digest:
             return
     except OSError:
         pass
     try:
-        for cached in PACKAGE.rglob("__pycache__/*.nb[ic]"):
+        for cached in folder.rglob("__pycache__/*.nb[ic]"):
             cached.unlink(missing_ok=True)
-        STAMP.parent.mkdir(exist_ok=True)
-        STAMP.write_text(digest)
+        stamp.parent.mkdir(exist_ok=True)
+        stamp.write_text(digest)
     except OSError:
         # a read-only installation: Numba cannot write a cache there either
         pass
