@@ -8,6 +8,7 @@ the cache was built from, drops its cached kernels so that they are compiled afr
 suite does the same for its own kernels, which inline raycore's (``tests/conftest.py``).
 """
 
+import functools
 import hashlib
 from pathlib import Path
 
@@ -16,8 +17,10 @@ PACKAGE = Path(__file__).resolve().parent
 STAMP_NAME = "kernel-sources.sha256"
 
 
+@functools.cache
 def sources_digest():
-    """SHA-256 of every module of the package, with its path."""
+    """SHA-256 of every module of the package, with its path (read once a process: raycore's
+    import and the test suite's ``conftest`` both ask for it)."""
     digest = hashlib.sha256()
     for path in sorted(PACKAGE.rglob("*.py")):
         digest.update(str(path.relative_to(PACKAGE)).encode())
