@@ -1,9 +1,10 @@
 """Flat node layout for traversal, and tree-quality statistics.
 
-The binary SAH tree is collapsed into a wide one (Wald et al. 2008, "Getting rid of packets"):
-each node holds up to eight children, whose boxes are stored plane by plane so that one vector
-instruction tests all eight (:mod:`raycore.bvh.simd`).  A wide node is one 256-byte row of
-float32 (four cache lines)::
+The binary SAH tree is collapsed into a wide one (Wald et al. 2008, "Getting rid of packets"),
+whose nodes' children are chosen for the least SAH cost (Ylitie et al. 2017, see
+:func:`_ranked_costs`): each node holds up to eight children, whose boxes are stored plane by
+plane so that one vector instruction tests all eight (:mod:`raycore.bvh.simd`).  A wide node
+is one 256-byte row of float32 (four cache lines)::
 
     [0:8] lo x   [8:16] lo y   [16:24] lo z   [24:32] hi x   [32:40] hi y   [40:48] hi z
     [48:56] refs   [56:64] counts   (int32 bit patterns)
@@ -87,34 +88,191 @@ INTERNAL_AREA, LEAF_AREA, NODE_COUNT, LEAF_COUNT = range(4)
 
 
 @njit(cache=True, inline="always")
-def _place(nodes, refs, slots, slot_area, slot, node, stats, block):
-    """Put binary ``node`` in ``slots[slot]`` and add it to the tree statistics ``stats`` (a
-    leaf weighs its blocks of ``block`` primitives); ``slot_area`` gets its half-area if it is
-    an internal node (one to open), else -1."""
-    slots[slot] = node
+def _count_node(nodes, refs, node, stats, block):
+    """Add binary ``node`` to the tree statistics ``stats`` (a leaf weighs its blocks of
+    ``block`` primitives)."""
     count = refs[node, BINARY_COUNT]
     area = _half_area(nodes, node)
     stats[NODE_COUNT] += 1
     if count > 0:
         stats[LEAF_AREA] += area * blocks_of(count, block)
         stats[LEAF_COUNT] += 1
-        slot_area[slot] = -1.0
     else:
         stats[INTERNAL_AREA] += area
-        slot_area[slot] = area
+
+
+# ---------------------------------------------------------------------------- which nodes
+# The greedy collapse (open the child of largest area until a row is full) left a third of the
+# rows with two children: a small subtree below a full row became a row of its own.  Ylitie,
+# Karras and Laine ("Efficient incoherent ray traversal on GPUs through compressed wide BVHs",
+# HPG 2017, section 3.1) choose each row's children by dynamic programming over the binary
+# tree instead, for the least SAH cost of the wide tree: a row costs its box's area times the
+# traversal cost, a leaf its area times its blocks.
+#
+# The costs are kept for internal nodes only, in a table of their own numbered breadth first,
+# subtree by subtree; an internal node's count field (0 in the binary tree) holds -(its
+# number + 1) while the tree is collapsed.  Kept for every record instead, the table was
+# resident far beyond the records in use (each subtree's records are reserved for its worst
+# case, and the kernel backs memory in 2 MiB pages): the build's temporaries grew from 38 to 78
+# bytes a triangle at 1.6M triangles.
+
+
+@njit(cache=True)
+def _breadth_first(refs, root, top_count, order, boundary):
+    """List the binary nodes below ``root`` (itself included) breadth first in ``order``, a
+    node before its children, without entering nodes ``>= top_count`` when ``top_count > 0``
+    (the subtrees built in parallel), which are listed in ``boundary`` instead.
+
+    Returns
+    -------
+    listed, bounded, internal : int
+        Entries of ``order`` and of ``boundary`` written, and internal nodes listed.
+    """
+    order[0] = root
+    listed, bounded, internal = 1, 0, 0
+    k = 0
+    while k < listed:
+        node = order[k]
+        k += 1
+        if refs[node, BINARY_COUNT] > 0:
+            continue
+        internal += 1
+        for side in range(2):
+            child = refs[node, BINARY_REF] + side
+            if top_count > 0 and child >= top_count:
+                boundary[bounded] = child
+                bounded += 1
+            else:
+                order[listed] = child
+                listed += 1
+    return listed, bounded, internal
+
+
+@njit(cache=True, inline="always")
+def _slot_cost(nodes, refs, costs, node, budget, prices, block):
+    """The least cost of binary ``node``'s subtree in at most ``budget`` slots of a row: a leaf's
+    area times its blocks times the intersection cost, however many slots; an internal node's
+    from its row of ``costs`` (:func:`_ranked_costs`)."""
+    count = refs[node, BINARY_COUNT]
+    if count > 0:
+        return _half_area(nodes, node) * prices[1] * blocks_of(count, block)
+    return np.float64(costs[-1 - count, budget - 1])
+
+
+@njit(cache=True, inline="always")
+def _cheapest_split(nodes, refs, costs, node, budget, prices, block):
+    """``(cost, left_budget)``: the least cost of internal binary ``node``'s two children in
+    ``budget`` slots of a row between them."""
+    left = refs[node, BINARY_REF]
+    best, best_left = np.inf, 1
+    for left_budget in range(1, budget):
+        cost = (_slot_cost(nodes, refs, costs, left, left_budget, prices, block)
+                + _slot_cost(nodes, refs, costs, left + 1, budget - left_budget, prices, block))
+        if cost < best:
+            best, best_left = cost, left_budget
+    return best, best_left
+
+
+@njit(cache=True)
+def _ranked_costs(nodes, refs, order, listed, first, costs, prices, block):
+    """Number the internal nodes of ``order[:listed]`` (a node before its children, as
+    :func:`_breadth_first` lists them) from ``first`` on, in that order, and fill their rows of
+    ``costs``, children first: ``costs[number, j - 1]`` is the least SAH cost (unnormalised)
+    of the node's subtree given at most ``j`` slots of a row.
+
+    An internal node in one slot is a row of its own: its area times the traversal cost, plus
+    its children's cheapest split of a whole row; with more slots it may instead put its
+    children in the row, splitting the slots between them.
+
+    Parameters
+    ----------
+    costs : ndarray of float32, shape (I, WIDTH)
+        One row per internal node of the tree.
+    prices : ndarray of float64, shape (2,)
+        Traversal cost of a row, intersection cost of a leaf block.
+    """
+    number = first
+    for k in range(listed):
+        if refs[order[k], BINARY_COUNT] <= 0:
+            refs[order[k], BINARY_COUNT] = -1 - number
+            number += 1
+    for k in range(listed - 1, -1, -1):
+        node = order[k]
+        count = refs[node, BINARY_COUNT]
+        if count > 0:
+            continue
+        row = -1 - count
+        alone = (_half_area(nodes, node) * prices[0]
+                 + _cheapest_split(nodes, refs, costs, node, WIDTH, prices, block)[0])
+        costs[row, 0] = alone
+        for budget in range(2, WIDTH + 1):
+            split = _cheapest_split(nodes, refs, costs, node, budget, prices, block)[0]
+            costs[row, budget - 1] = min(alone, split)
+
+
+@njit(cache=True, parallel=True)
+def _internal_counts(refs, roots, size, counts):
+    """``counts[t]``: internal nodes below each of ``roots`` (subtrees of at most ``size``
+    nodes), on all cores."""
+    none = np.empty(0, np.int64)
+    for t in prange(len(roots)):
+        order = np.empty(size, np.int64)
+        counts[t] = _breadth_first(refs, roots[t], np.int64(0), order, none)[2]
+
+
+@njit(cache=True, parallel=True)
+def _subtree_costs(nodes, refs, roots, size, firsts, costs, prices, block):
+    """:func:`_ranked_costs` below each of ``roots``, numbered from ``firsts``, on all
+    cores."""
+    none = np.empty(0, np.int64)
+    for t in prange(len(roots)):
+        order = np.empty(size, np.int64)
+        listed = _breadth_first(refs, roots[t], np.int64(0), order, none)[0]
+        _ranked_costs(nodes, refs, order, listed, firsts[t], costs, prices, block)
+
+
+@njit(cache=True, inline="always")
+def _fill_row(nodes, refs, node, costs, prices, slots, pending, budgets, stats, block):
+    """Choose the children of the row of internal binary ``node`` by their slot costs: put them
+    in ``slots`` and return how many; add every binary node met below ``node`` to ``stats``.
+    ``pending``, ``budgets``: scratch of WIDTH entries."""
+    left = refs[node, BINARY_REF]
+    _, left_budget = _cheapest_split(nodes, refs, costs, node, WIDTH, prices, block)
+    # depth first, the left child first, each with its share of the slots
+    pending[0], budgets[0] = left + 1, WIDTH - left_budget
+    pending[1], budgets[1] = left, left_budget
+    waiting = 2
+    size = 0
+    while waiting:
+        waiting -= 1
+        child, budget = pending[waiting], budgets[waiting]
+        _count_node(nodes, refs, child, stats, block)
+        if refs[child, BINARY_COUNT] <= 0 and budget > 1:
+            split, left_budget = _cheapest_split(nodes, refs, costs, child, budget, prices,
+                                                 block)
+            if split < _slot_cost(nodes, refs, costs, child, 1, prices, block):
+                # its children take its slots
+                first = refs[child, BINARY_REF]
+                pending[waiting], budgets[waiting] = first + 1, budget - left_budget
+                pending[waiting + 1], budgets[waiting + 1] = first, left_budget
+                waiting += 2
+                continue
+        slots[size] = child
+        size += 1
+    return size
 
 
 @njit(cache=True)
 def _collapse(nodes, refs, root, first_row, top_count, deferred, deferred_rows, queue, wide,
-              write, count_root, stats, block):
+              write, count_root, stats, costs, prices, block):
     """Group the binary nodes below ``root`` into wide nodes of up to WIDTH children, breadth
     first, as rows ``first_row, first_row + 1, ...`` of ``wide``.
 
-    From each wide node's binary node, the child of largest surface area that is an internal
-    node is replaced by its two children until there are WIDTH of them (or only leaves).  A
-    row depends only on its binary node, so the top of the tree (``top_count`` > 0) can leave
-    the rows of binary nodes past the top records (``>= top_count``) to collapses of their own,
-    run beside each other: such a node is listed in ``deferred``, and its row taken from
+    Each wide node's children are the cheapest choice by ``costs`` and ``prices``
+    (:func:`_ranked_costs`, for every internal node below ``root``), :func:`_fill_row`.  A row
+    depends only on its binary node, so the top of the tree (``top_count`` > 0) can leave the
+    rows of binary nodes past the top records (``>= top_count``) to collapses of their own, run
+    beside each other: such a node is listed in ``deferred``, and its row taken from
     ``deferred_rows`` in the same order.
 
     Parameters
@@ -127,7 +285,7 @@ def _collapse(nodes, refs, root, first_row, top_count, deferred, deferred_rows, 
         Written only when ``write``: a first call counts rows, a second fills them.
     count_root : bool
         Whether ``root`` itself adds to ``stats`` (the tree statistics, see INTERNAL_AREA), to
-        which every node placed in a slot adds.
+        which every binary node below it adds.
 
     Returns
     -------
@@ -135,10 +293,11 @@ def _collapse(nodes, refs, root, first_row, top_count, deferred, deferred_rows, 
     """
     wide_refs = wide.view(np.int32)
     slots = np.empty(WIDTH, np.int64)
-    slot_area = np.empty(WIDTH)
     slot_row = np.empty(WIDTH, np.int64)
+    pending = np.empty(WIDTH, np.int64)
+    budgets = np.empty(WIDTH, np.int64)
     if count_root:
-        _place(nodes, refs, slots, slot_area, 0, root, stats, block)
+        _count_node(nodes, refs, root, stats, block)
     queue[0] = root
     rows = 1
     row = 0
@@ -147,22 +306,9 @@ def _collapse(nodes, refs, root, first_row, top_count, deferred, deferred_rows, 
         node = queue[row]
         size = 1
         slots[0] = node  # a root leaf: a wide node with one child
-        if refs[node, BINARY_COUNT] == 0:
-            _place(nodes, refs, slots, slot_area, 0, refs[node, BINARY_REF], stats, block)
-            _place(nodes, refs, slots, slot_area, 1, refs[node, BINARY_REF] + 1, stats, block)
-            size = 2
-        while size < WIDTH:
-            widest = -1
-            for slot in range(size):
-                if slot_area[slot] >= 0 and (widest < 0 or slot_area[slot] > slot_area[widest]):
-                    widest = slot
-            if widest < 0:
-                break
-            child = slots[widest]
-            first = refs[child, BINARY_REF]
-            _place(nodes, refs, slots, slot_area, widest, first, stats, block)
-            _place(nodes, refs, slots, slot_area, size, first + 1, stats, block)
-            size += 1
+        if refs[node, BINARY_COUNT] <= 0:
+            size = _fill_row(nodes, refs, node, costs, prices, slots, pending, budgets, stats,
+                             block)
         for slot in range(size):
             child = slots[slot]
             if refs[child, BINARY_COUNT] > 0 or node == child:
@@ -202,14 +348,14 @@ def _write_row(nodes, refs, wide, wide_refs, row, slots, slot_row, size):
             hi = nodes[child, 3 + axis]
             wide[row, axis * WIDTH + slot] = -np.inf if lo == -FLOAT32_MAX else lo
             wide[row, (axis + 3) * WIDTH + slot] = np.inf if hi == FLOAT32_MAX else hi
-        count = refs[child, BINARY_COUNT]
+        count = max(refs[child, BINARY_COUNT], 0)  # an internal node's may hold its number
         wide_refs[row, REFS + slot] = refs[child, BINARY_REF] if count > 0 else slot_row[slot]
         wide_refs[row, COUNTS + slot] = count
 
 
 @njit(cache=True, parallel=True)
 def _collapse_subtrees(nodes, refs, roots, queue_size, first_rows, wide, write, stats, rows,
-                       block):
+                       costs, prices, block):
     """:func:`_collapse` below each of ``roots`` on all cores; ``stats`` (T, 4) and ``rows``
     (T,) receive each one's figures.  ``queue_size`` bounds any one's rows."""
     none = np.empty(0, np.int64)
@@ -218,12 +364,36 @@ def _collapse_subtrees(nodes, refs, roots, queue_size, first_rows, wide, write, 
         own = np.zeros(4)  # not a row of stats, which neighbouring subtrees' threads share
         # typed values, not literals, so that this call shares _wide_layout's compiled _collapse
         rows[t], _ = _collapse(nodes, refs, roots[t], first_rows[t], np.int64(0), none, none,
-                               queue, wide, write, np.bool_(False), own, block)
+                               queue, wide, write, np.bool_(False), own, costs, prices,
+                               block)
         for k in range(4):  # not a slice assignment, whose shape check takes long to compile
             stats[t, k] = own[k]
 
 
-def _wide_layout(binary, prim_count, block):
+def _slot_costs(binary, prim_count, prices, block):
+    """:func:`_ranked_costs` of every internal binary node, (I, WIDTH) float32, numbered: the
+    top of the tree first, then each subtree built in parallel (on all cores)."""
+    refs = binary.nodes.view(np.int32)
+    top_count = binary.top_count if binary.top_count > 1 else 0  # 1: one subtree, the tree
+    order = np.empty(top_count or max(2 * prim_count - 1, 1), np.int64)
+    boundary = np.empty(2 * top_count, np.int64)
+    listed, bounded, top_internal = _breadth_first(refs, 0, top_count, order, boundary)
+    roots = boundary[:bounded]
+    size = 2 * binary.largest_subtree - 1  # nodes of a subtree over m primitives: 2m - 1
+    counts = np.zeros(bounded, np.int64)
+    if bounded:
+        with parallel_chunksize(1):
+            _internal_counts(refs, roots, size, counts)
+    firsts = top_internal + np.cumsum(counts) - counts
+    costs = np.empty((top_internal + int(counts.sum()), WIDTH), np.float32)
+    if bounded:
+        with parallel_chunksize(1):
+            _subtree_costs(binary.nodes, refs, roots, size, firsts, costs, prices, block)
+    _ranked_costs(binary.nodes, refs, order, listed, 0, costs, prices, block)
+    return costs
+
+
+def _wide_layout(binary, prim_count, params):
     """Collapse a :class:`~raycore.bvh.build.BinaryBVH` into wide rows: (nodes, stats), with
     stats the tree statistics (see INTERNAL_AREA), summed in an order that does not depend on
     the number of threads.
@@ -231,10 +401,14 @@ def _wide_layout(binary, prim_count, block):
     The top of the tree is collapsed first; the rows below it, inside the subtrees that were
     built in parallel, are then collapsed in parallel too, each group after the rows before it.
     Every collapse runs twice, counting rows and then filling them, so that the rows need no
-    room beyond their own.
+    room beyond their own.  The binary tree's internal nodes are left numbered (their count
+    fields, :func:`_ranked_costs`): it is of no use once collapsed.
     """
     nodes = binary.nodes
     refs = nodes.view(np.int32)
+    block = params.block_size
+    prices = np.array([params.traversal_cost, params.intersection_cost])
+    costs = _slot_costs(binary, prim_count, prices, block)
     empty = np.empty((0, NODE_WIDTH), np.float32)
     none = np.empty(0, np.int64)
     stats = np.zeros(4)
@@ -242,14 +416,15 @@ def _wide_layout(binary, prim_count, block):
         # one subtree, the whole tree
         queue = np.empty(max(prim_count, 1), np.int64)
         rows, _ = _collapse(nodes, refs, 0, 0, 0, none, none, queue, empty, False, True, stats,
-                            block)
+                            costs, prices, block)
         wide = _new_rows(rows)
-        _collapse(nodes, refs, 0, 0, 0, none, none, queue, wide, True, True, np.zeros(4), block)
+        _collapse(nodes, refs, 0, 0, 0, none, none, queue, wide, True, True, np.zeros(4), costs,
+                  prices, block)
         return wide, stats
     queue = np.empty(binary.top_count, np.int64)
     deferred = np.empty(WIDTH * binary.top_count, np.int64)
     top_rows, count = _collapse(nodes, refs, 0, 0, binary.top_count, deferred, none, queue,
-                                empty, False, True, stats, block)
+                                empty, False, True, stats, costs, prices, block)
     deferred = deferred[:count]
     # a subtree over m primitives has at most m - 1 internal nodes, one per wide row
     queue_size = binary.largest_subtree
@@ -257,14 +432,14 @@ def _wide_layout(binary, prim_count, block):
     sub_rows = np.empty(count, np.int64)
     with parallel_chunksize(1):
         _collapse_subtrees(nodes, refs, deferred, queue_size, np.zeros(count, np.int64), empty,
-                           False, sub_stats, sub_rows, block)
+                           False, sub_stats, sub_rows, costs, prices, block)
     first_rows = top_rows + np.concatenate([[0], np.cumsum(sub_rows)[:-1]]).astype(np.int64)
     wide = _new_rows(top_rows + int(sub_rows.sum()))
     _collapse(nodes, refs, 0, 0, binary.top_count, none, first_rows, queue, wide, True, True,
-              np.zeros(4), block)
+              np.zeros(4), costs, prices, block)
     with parallel_chunksize(1):
         _collapse_subtrees(nodes, refs, deferred, queue_size, first_rows, wide, True, sub_stats,
-                           sub_rows, block)
+                           sub_rows, costs, prices, block)
     for part in sub_stats:
         stats += part
     return wide, stats
@@ -289,7 +464,7 @@ def build_bvh_from_records(prims, lo, hi, params=None):
     params = params or BuildParams()
     check_primitive_count(len(prims))
     binary = build_binary_bvh(prims, params)
-    nodes, stats = _wide_layout(binary, len(prims), params.block_size)
+    nodes, stats = _wide_layout(binary, len(prims), params)
     root_area = float(_half_area(binary.nodes, 0))
     binary_depth = binary.depth
     del binary  # its nodes are the build's largest temporary after the records

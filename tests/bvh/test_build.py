@@ -1,6 +1,7 @@
 """The binned SAH build: structure, containment, parameters, reported quality, threads and
 degenerate input."""
 
+import functools
 from dataclasses import replace
 
 import numba
@@ -181,15 +182,79 @@ def test_reported_quality_matches_the_tree(count):
     assert bvh.sah_cost == pytest.approx(expected, rel=1e-12)
     assert bvh.node_count == len(rows) == 2 * bvh.leaf_count - 1
     assert bvh.depth == depth == depths.max()
-    # collapsing keeps the binary tree's leaves, and fills a wide node unless only leaves are
-    # left to open (the larger tree is collapsed in parts, its top, then the rest in parallel)
+    # collapsing keeps the binary tree's leaves (the larger tree is collapsed in parts, its top,
+    # then the rest in parallel), and a wide node has at least two children
     first = nodes.view(np.int32)[rows, BINARY_REF]
     assert sorted((int(f), int(c)) for *_, f, c in leaves) == sorted(
         zip(first[leaf].tolist(), count[leaf].tolist(), strict=True))
-    used = np.isfinite(bvh.nodes[:, 0:WIDTH])
-    assert used.sum(axis=1).min() >= 2
-    partial = used.sum(axis=1) < WIDTH
-    assert np.all(bvh.refs[partial, COUNTS:COUNTS + WIDTH][used[partial]] > 0)
+    assert np.isfinite(bvh.nodes[:, 0:WIDTH]).sum(axis=1).min() >= 2
+
+
+def half_area(lo, hi):
+    extent = np.asarray(hi, np.float64) - np.asarray(lo, np.float64)
+    return extent[0] * extent[1] + extent[1] * extent[2] + extent[2] * extent[0]
+
+
+def cheapest_collapse(nodes, params):
+    """The least SAH cost of any wide tree over the binary tree ``nodes`` (a row costs its box's
+    half-area times the traversal cost, a leaf its half-area times its blocks times the
+    intersection cost), by enumerating every choice of each row's children: the row of an
+    internal node may hold any cut of its subtree of at most WIDTH nodes (sets of descendants
+    covering each leaf below once), and a cut's internal nodes are rows of their own."""
+    refs = nodes.view(np.int32)
+
+    def box_area(node):
+        return half_area(nodes[node, 0:3], nodes[node, 3:6])
+
+    def children(node):
+        first = int(refs[node, BINARY_REF])
+        return first, first + 1
+
+    @functools.cache
+    def cuts(node):
+        # every cut of node's subtree (node alone included) of at most WIDTH nodes
+        found = {frozenset([node])}
+        if refs[node, BINARY_COUNT] == 0:
+            left, right = children(node)
+            found |= {a | b for a in cuts(left) for b in cuts(right) if len(a) + len(b) <= WIDTH}
+        return found
+
+    @functools.cache
+    def subtree_cost(node):
+        count = int(refs[node, BINARY_COUNT])
+        if count > 0:
+            return (box_area(node) * params.intersection_cost
+                    * -(-count // params.block_size))
+        left, right = children(node)
+        return box_area(node) * params.traversal_cost + min(
+            sum(subtree_cost(child) for child in a | b)
+            for a in cuts(left) for b in cuts(right) if len(a) + len(b) <= WIDTH)
+
+    return subtree_cost(0)
+
+
+def wide_cost(bvh, root_area, params):
+    """The same SAH cost of a built wide tree: its root, each row below it (the box of its slot)
+    and each leaf."""
+    internal = []
+    leaves = list(walk(bvh, internal))
+    return (params.traversal_cost * (root_area + sum(half_area(lo, hi) for lo, hi in internal))
+            + params.intersection_cost * sum(half_area(lo, hi) * -(-count // params.block_size)
+                                             for lo, hi, _, count in leaves))
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("params", [BuildParams(), BuildParams(max_leaf_size=8, block_size=4),
+                                    BuildParams(traversal_cost=3.0, intersection_cost=0.5)])
+def test_wide_nodes_are_the_cheapest_choice_of_children(seed, params):
+    # the greedy choice (open the child of largest area until a row is full) leaves small
+    # subtrees below full rows as rows of two: ten of these trees cost more that way
+    lo, hi = random_boxes(60, seed=seed)
+    binary = build_binary_bvh(records_from_bounds(lo, hi), params)
+    bvh = build_bvh(lo, hi, params)
+    root_area = half_area(binary.nodes[0, 0:3], binary.nodes[0, 3:6])
+    assert wide_cost(bvh, root_area, params) == pytest.approx(
+        cheapest_collapse(binary.nodes, params), rel=1e-6)
 
 
 def test_sah_prefers_fewer_tests_when_intersections_are_expensive():
