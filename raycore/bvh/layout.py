@@ -202,12 +202,13 @@ def _ranked_costs(nodes, refs, order, listed, first, costs, prices, block):
         if count > 0:
             continue
         row = -1 - count
-        alone = (_half_area(nodes, node) * prices[0]
-                 + _cheapest_split(nodes, refs, costs, node, WIDTH, prices, block)[0])
+        whole = _cheapest_split(nodes, refs, costs, node, WIDTH, prices, block)[0]
+        alone = _half_area(nodes, node) * prices[0] + whole
         costs[row, 0] = alone
-        for budget in range(2, WIDTH + 1):
+        for budget in range(2, WIDTH):
             split = _cheapest_split(nodes, refs, costs, node, budget, prices, block)[0]
             costs[row, budget - 1] = min(alone, split)
+        costs[row, WIDTH - 1] = min(alone, whole)
 
 
 @njit(cache=True, parallel=True)
@@ -372,7 +373,9 @@ def _collapse_subtrees(nodes, refs, roots, queue_size, first_rows, wide, write, 
 
 def _slot_costs(binary, prim_count, prices, block):
     """:func:`_ranked_costs` of every internal binary node, (I, WIDTH) float32, numbered: the
-    top of the tree first, then each subtree built in parallel (on all cores)."""
+    top of the tree first, then each subtree built in parallel (on all cores).  Each subtree is
+    listed twice, to count its internal nodes and then to number them, so that the table is
+    sized to them before any is filled, as :func:`_collapse` counts rows before it writes them."""
     refs = binary.nodes.view(np.int32)
     top_count = binary.top_count if binary.top_count > 1 else 0  # 1: one subtree, the tree
     order = np.empty(top_count or max(2 * prim_count - 1, 1), np.int64)
