@@ -20,6 +20,8 @@ plane, never narrows the interval).  It runs in float32 for rays of either preci
 float64 ray's origin rounded outwards (:func:`_box_ray`).
 """
 
+import math
+
 import numpy as np
 from numba import njit
 
@@ -103,36 +105,49 @@ def _line_rows(threads, count, dtype):
 
 
 @njit(cache=True, forceinline=True)
-def _below32(x):
-    """A float32 at most ``x``, at most two float32 ulps below it (``x`` itself for a float32).
-
-    Without a branch or a library call (``np.nextafter`` is one): one ulp of a float32 r is at
-    most |r|·2^-23, or 2^-149 below the normal range, so r less that much is below ``x``.  Both
-    values are computed before the choice, which LLVM then makes with a select: computed in its
-    arm, the step down stayed behind a branch that float64 rays take at random."""
-    r = np.float32(x)
-    lower = r - (abs(r) * np.float32(2**-23) + np.float32(2**-149))
-    return r if r <= x else lower
+def _float32_step(x):
+    """More than a float32 ulp of ``x``: |x|·2^-23, or 2^-149 below the normal range, in
+    ``x``'s precision (|x| capped, so that an infinite ``x`` stays infinite when moved)."""
+    return min(abs(x), like(x, 2.0**128)) * like(x, 2.0**-23) + like(x, 2.0**-149)
 
 
 @njit(cache=True, forceinline=True)
-def _above32(x):
-    """A float32 at least ``x``, at most two float32 ulps above it (as :func:`_below32`)."""
-    r = np.float32(x)
-    higher = r + (abs(r) * np.float32(2**-23) + np.float32(2**-149))
-    return r if r >= x else higher
+def _rounded32(x, step):
+    """A float32 beyond ``x`` on the side of ``step``'s sign, within three float32 ulps of
+    it; ``x`` itself for a float32.
+
+    Without a branch or a library call (``np.nextafter`` is one): ``x`` is moved by ``step``
+    (:func:`_float32_step`, either sign), then rounded to the nearest float32, which is at
+    most half an ulp back; ``x``'s own precision rounds the move by 2^-29 of that margin.
+    Chosen by comparing ``x`` with the float32 nearest it instead, the step was compiled as a
+    branch, which float64 rays take at random: a ray that missed the mesh took 63 ns, against
+    31 for a float32 ray (fandisk, one thread)."""
+    if unit_roundoff(x) >= unit_roundoff(np.float32(0)):
+        return np.float32(x)
+    return np.float32(x + step)
 
 
 @njit(cache=True, forceinline=True)
 def _bounds32(tmin, tmax):
-    """The ray's bounds as the float32 box test takes them: rounded outwards to float32 and
-    widened by 2γ(6) of themselves.  The test's near distance may exceed the exact one by a
-    factor 1 + γ(6) (see :func:`_box_ray`); Ize's analysis pads the far distance for that, and a
-    bound needs it too: a box entered exactly at tmax (a ray that ends on a face) was missed."""
+    """The ray's bounds as the float32 box test takes them: widened by 2γ(6) of themselves in
+    float32.  The test's near distance may exceed the exact one by a factor 1 + γ(6) (see
+    :func:`_box_ray`); Ize's analysis pads the far distance for that, and a bound needs it too:
+    a box entered exactly at tmax (a ray that ends on a face) was missed.
+
+    A float64 bound is rounded to the nearest float32, which may be 2^-24 of it on the wrong
+    side (or 2^-150 below the normal range, which 2^-149 more covers); with the two roundings
+    of the widening, that leaves more than γ(6) of the 2γ(6).  Rounded outwards instead, by a
+    comparison with the nearest float32, the bounds cost a branch taken at random, or, without
+    the branch, their latency, at every hit that shortens a float64 ray: 12-27 % of a float64
+    ray's time (one thread, framed cameras and random rays).
+    """
     slack = np.float32(2) * gamma(6, np.float32(0))
-    lo = _below32(tmin)
-    hi = _above32(tmax)
-    return lo - abs(lo) * slack, hi + abs(hi) * slack
+    lo = np.float32(tmin)
+    hi = np.float32(tmax)
+    beyond = np.float32(0)
+    if unit_roundoff(tmax) < unit_roundoff(np.float32(0)):  # float64 rays
+        beyond = np.float32(2**-149)
+    return lo - abs(lo) * slack - beyond, hi + abs(hi) * slack + beyond
 
 
 @njit(cache=True, forceinline=True, error_model="numpy")
@@ -159,18 +174,18 @@ def _box_ray(ox, oy, oz, dx, dy, dz):
     ix = np.float32(like(ox, 1) / dx)
     iy = np.float32(like(ox, 1) / dy)
     iz = np.float32(like(ox, 1) / dz)
-    nx, ny, nz = fx, fy, fz = np.float32(ox), np.float32(oy), np.float32(oz)
-    if wide:
-        # forward along an axis (reciprocal >= 0, as enter8 decides): the near plane is the
-        # box's low one, whose distance shrinks with the origin rounded up; backward, the
-        # other way round.  Both roundings come first, and the direction's sign picks one with
-        # a select: branches on it, mispredicted half the time on random rays, took 15-20 % of
-        # a float64 random ray's time (suzanne, one thread).
-        upx, upy, upz = _above32(ox), _above32(oy), _above32(oz)
-        downx, downy, downz = _below32(ox), _below32(oy), _below32(oz)
-        nx, fx = (upx, downx) if ix >= 0 else (downx, upx)
-        ny, fy = (upy, downy) if iy >= 0 else (downy, upy)
-        nz, fz = (upz, downz) if iz >= 0 else (downz, upz)
+    # forward along an axis (reciprocal >= 0, as enter8 decides): the near plane is the box's
+    # low one, whose distance shrinks with the origin rounded up, and the far plane's grows
+    # with it rounded down; backward, the other way round.  The reciprocal's sign moves the
+    # rounding itself (a reciprocal of -0, which enter8 takes as forward, makes every slab
+    # distance of its axis 0 or NaN, wherever the origin is): branches on the sign,
+    # mispredicted half the time on random rays, took 15-20 % of a float64 random ray's time
+    # (suzanne, one thread).
+    sx = math.copysign(_float32_step(ox), ix)
+    sy = math.copysign(_float32_step(oy), iy)
+    sz = math.copysign(_float32_step(oz), iz)
+    nx, ny, nz = _rounded32(ox, sx), _rounded32(oy, sy), _rounded32(oz, sz)
+    fx, fy, fz = _rounded32(ox, -sx), _rounded32(oy, -sy), _rounded32(oz, -sz)
     return (nx, ny, nz, fx, fy, fz, ix, iy, iz, ix * pad, iy * pad, iz * pad)
 
 
@@ -399,14 +414,6 @@ def trace_ray(scene, mode, test, sphere_method, ox, oy, oz, dx, dy, dz, tmin, tm
     best_prim = -1
     best_u = best_v = like(ox, 0)
     found = np.int64(0)  # not a literal 0, which would compile _trace_mesh once more
-    # A scene of one untransformed mesh, the common case, goes straight into the mesh's BVH:
-    # the loop over objects below costs 13-15 % on camera rays, most of which miss (bunny).
-    if len(top_nodes) == 0 and len(direct) == 1 and kind[direct[0]] == MESH and \
-            scene.xform_row[direct[0]] < 0:
-        t, p, u, v, found = _trace_mesh(
-            scene, mode, test, ox, oy, oz, dx, dy, dz, tmin, best_t, scene.mesh_of[direct[0]],
-            direct[0], int_row, real_row, hit_t, hit_obj, hit_prim, found)
-        return t, direct[0] if p >= 0 else -1, p, u, v, found
     box = _box_ray(ox, oy, oz, dx, dy, dz)
     # The direct objects live outside the top-level BVH; they are processed first, as a leaf of
     # their own, so that they can shorten the ray before traversal.
@@ -613,6 +620,37 @@ def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tma
     int
         The first refused ray, or N if none (refused rays are not traced).
     """
+    lone = _lone_mesh(scene)
+    # two copies of the loop, each compiled for its kind of scene: the check made once, not per
+    # ray, and the lone mesh's loop free of the code of every other scene
+    if lone >= 0:
+        return _trace_each(scene, mode, test, sphere_method, origins, directions, tmin, tmax,
+                           start, stop, out_t, out_obj, out_prim, out_hit, out_u, out_v,
+                           out_slot, offsets, hits_t, hits_obj, hits_prim, int_row, real_row,
+                           capacity, lone, True)
+    return _trace_each(scene, mode, test, sphere_method, origins, directions, tmin, tmax, start,
+                       stop, out_t, out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets,
+                       hits_t, hits_obj, hits_prim, int_row, real_row, capacity, lone, False)
+
+
+@njit(inline="always")
+def _lone_mesh(scene):
+    """The object of a scene that is one untransformed mesh (the common case), whose rays go
+    straight into the mesh's BVH; -1 for any other scene.  The loop over objects costs 13-15 %
+    on camera rays, most of which miss (bunny)."""
+    direct = scene.direct
+    if len(scene.top_nodes) == 0 and len(direct) == 1 and scene.kind[direct[0]] == MESH and \
+            scene.xform_row[direct[0]] < 0:
+        return direct[0]
+    return np.int64(-1)
+
+
+@njit(forceinline=True, error_model="numpy", _nrt=False)
+def _trace_each(scene, mode, test, sphere_method, origins, directions, tmin, tmax, start, stop,
+                out_t, out_obj, out_prim, out_hit, out_u, out_v, out_slot, offsets, hits_t,
+                hits_obj, hits_prim, int_row, real_row, capacity, lone, straight):
+    """:func:`trace_range`'s loop; ``straight`` (a constant where it is inlined): every ray goes
+    straight into the BVH of ``lone``, the scene's one mesh (:func:`_lone_mesh`)."""
     n = len(origins)
     lo_step = 1 if len(tmin) == n else 0
     hi_step = 1 if len(tmax) == n else 0
@@ -629,10 +667,17 @@ def trace_range(scene, mode, test, sphere_method, origins, directions, tmin, tma
         if _bad_ray(origins, directions, i, lo, hi):
             first_bad = min(first_bad, i)
             continue
-        t, obj, prim, u, v, found = trace_ray(
-            scene, mode, test, sphere_method, origins[i, 0], origins[i, 1], origins[i, 2],
-            directions[i, 0], directions[i, 1], directions[i, 2], lo, hi, int_row, real_row,
-            hit_t, hit_obj, hit_prim)
+        if straight:
+            t, prim, u, v, found = _trace_mesh(
+                scene, mode, test, origins[i, 0], origins[i, 1], origins[i, 2], directions[i, 0],
+                directions[i, 1], directions[i, 2], lo, hi, scene.mesh_of[lone], lone, int_row,
+                real_row, hit_t, hit_obj, hit_prim, np.int64(0))
+            obj = lone if prim >= 0 else -1
+        else:
+            t, obj, prim, u, v, found = trace_ray(
+                scene, mode, test, sphere_method, origins[i, 0], origins[i, 1], origins[i, 2],
+                directions[i, 0], directions[i, 1], directions[i, 2], lo, hi, int_row, real_row,
+                hit_t, hit_obj, hit_prim)
         if mode == ANY:
             out_hit[i] = obj >= 0
         elif mode == CLOSEST:

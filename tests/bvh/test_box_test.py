@@ -17,7 +17,7 @@ from numba import njit
 import raycore
 from raycore.bvh.layout import NODE_WIDTH, WIDTH
 from raycore.bvh.simd import enter8
-from raycore.bvh.traverse import _bounds32, _box_ray
+from raycore.bvh.traverse import _bounds32, _box_ray, _float32_step, _rounded32
 
 
 @njit
@@ -92,6 +92,64 @@ def test_box_test_never_misses_an_entered_box(dtype):
     assert not missed, missed[:5]
     # the cases reach the boxes (most rays are aimed at one)
     assert entered > 2000
+
+
+@njit
+def _roundings(values, below, above, lo, hi):
+    for i in range(len(values)):
+        step = _float32_step(values[i])
+        below[i] = _rounded32(values[i], -step)
+        above[i] = _rounded32(values[i], step)
+        lo[i], hi[i] = _bounds32(values[i], values[i])
+
+
+def _float32_ulps_apart(a, b):
+    """How many float32 values lie in (a, b] (a <= b, both float32), by their ordered bits."""
+    def order(x):
+        bits = np.float32(x).view(np.int32).astype(np.int64)
+        return np.where(bits < 0, -(bits & 0x7FFFFFFF), bits)
+    return order(b) - order(a)
+
+
+def _rounding_cases(rng):
+    """float64 values near float32 ones, ties between two, subnormals and the ends of float32's
+    range, and float32 values among them."""
+    near32 = rng.uniform(-1e4, 1e4, 3000).astype(np.float32).astype(np.float64)
+    ties = near32 + np.spacing(near32.astype(np.float32)).astype(np.float64) / 2
+    return near32, np.concatenate([
+        near32, ties, np.nextafter(near32, np.inf), np.nextafter(near32, -np.inf),
+        rng.normal(size=3000) * 10.0 ** rng.integers(-40, 38, 3000),
+        np.array([0.0, -0.0, 2.0**-149, -(2.0**-149), 2.0**-150, 3 * 2.0**-151, 1e-300,
+                  -1e-300, 2.0**-126, float(np.finfo(np.float32).max), np.inf, -np.inf])])
+
+
+def test_float64_values_are_rounded_outwards_to_float32():
+    # The box test takes a float64 ray's origin rounded outwards to float32 and its bounds
+    # widened by more than γ(6), without a branch (the origin moved by more than an ulp, then
+    # rounded to nearest; the bounds rounded to nearest, then widened): checked against exact
+    # comparisons.
+    float32_values, values = _rounding_cases(np.random.default_rng(7))
+    outputs = [np.empty(len(values), np.float32) for _ in range(4)]
+    _roundings(values, *outputs)
+    below, above, lo, hi = (out.astype(np.float64) for out in outputs)
+    # (comparisons of float32 and float64 values, and Fractions of finite ones, are exact)
+    assert np.all(below <= values) and np.all(values <= above)
+    finite = np.abs(values) <= np.finfo(np.float32).max
+    # within three float32 ulps of the float32 nearest the value
+    nearest = values[finite].astype(np.float32)
+    assert np.all(_float32_ulps_apart(outputs[0][finite], nearest) <= 3)
+    assert np.all(_float32_ulps_apart(nearest, outputs[1][finite]) <= 3)
+    # the bounds: lo at most the value, hi at least (1 + γ(6)) times it (as far from zero
+    # when negative), as the box test's near distances need
+    gamma6 = Fraction(6 * 2**-24) / (1 - Fraction(6 * 2**-24))
+    assert np.all(lo[finite] <= values[finite])
+    assert all(h == np.inf or Fraction(h) >= Fraction(v) + abs(Fraction(v)) * gamma6
+               for h, v in zip(hi[finite], values[finite], strict=True))
+    assert np.all(hi[~finite & (values > 0)] == np.inf)
+    # a float32 value (a float32 ray's) is kept as it is
+    kept = [np.empty(len(float32_values), np.float32) for _ in range(4)]
+    _roundings(float32_values.astype(np.float32), *kept)
+    assert np.array_equal(kept[0], float32_values) and np.array_equal(kept[1], float32_values)
 
 
 def _square(cells, height, shift):
