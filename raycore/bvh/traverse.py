@@ -105,6 +105,13 @@ def _line_rows(threads, count, dtype):
 
 
 @njit(cache=True, forceinline=True)
+def _wide(x):
+    """Whether ``x`` is a float64 (a float64 ray's), which the float32 box test must round; a
+    constant where compiled."""
+    return unit_roundoff(x) < unit_roundoff(np.float32(0))
+
+
+@njit(cache=True, forceinline=True)
 def _float32_step(x):
     """More than a float32 ulp of ``x``: |x|·2^-23, or 2^-149 below the normal range, in
     ``x``'s precision (|x| capped, so that an infinite ``x`` stays infinite when moved)."""
@@ -122,7 +129,7 @@ def _rounded32(x, step):
     Chosen by comparing ``x`` with the float32 nearest it instead, the step was compiled as a
     branch, which float64 rays take at random: a ray that missed the mesh took 63 ns, against
     31 for a float32 ray (fandisk, one thread)."""
-    if unit_roundoff(x) >= unit_roundoff(np.float32(0)):
+    if not _wide(x):
         return np.float32(x)
     return np.float32(x + step)
 
@@ -145,7 +152,7 @@ def _bounds32(tmin, tmax):
     lo = np.float32(tmin)
     hi = np.float32(tmax)
     beyond = np.float32(0)
-    if unit_roundoff(tmax) < unit_roundoff(np.float32(0)):  # float64 rays
+    if _wide(tmax):
         beyond = np.float32(2**-149)
     return lo - abs(lo) * slack - beyond, hi + abs(hi) * slack + beyond
 
@@ -169,8 +176,7 @@ def _box_ray(ox, oy, oz, dx, dy, dz):
     tuple of 12 float32
         Near-plane origin (x, y, z), far-plane origin, reciprocal, padded reciprocal.
     """
-    wide = unit_roundoff(ox) < unit_roundoff(np.float32(0))  # float64 rays
-    pad = np.float32(1) + np.float32(2) * gamma(5 + wide, np.float32(0))
+    pad = np.float32(1) + np.float32(2) * gamma(5 + _wide(ox), np.float32(0))
     ix = np.float32(like(ox, 1) / dx)
     iy = np.float32(like(ox, 1) / dy)
     iz = np.float32(like(ox, 1) / dz)

@@ -31,6 +31,12 @@ def random_boxes(count, seed=0):
     return centers - half, centers + half
 
 
+def half_area(lo, hi):
+    """Half the surface area of boxes ``lo``, ``hi`` (shape (..., 3)), in float64."""
+    extent = (np.asarray(hi, np.float64) - np.asarray(lo, np.float64)).T
+    return extent[0] * extent[1] + extent[1] * extent[2] + extent[2] * extent[0]
+
+
 def walk(bvh, internal=None):
     """Yield (box_lo, box_hi, first, count) for every leaf, checking node containment.
 
@@ -172,9 +178,7 @@ def test_reported_quality_matches_the_tree(count):
     assert np.array_equal(prims.view(np.int32)[:, PRIM_INDEX], bvh.order)
     nodes, depth = binary.nodes, binary.depth
     rows, depths = binary_nodes(nodes)
-    box = nodes[rows, 0:6].astype(np.float64)
-    extent = box[:, 3:6] - box[:, 0:3]
-    area = extent[:, 0] * extent[:, 1] + extent[:, 1] * extent[:, 2] + extent[:, 2] * extent[:, 0]
+    area = half_area(nodes[rows, 0:3], nodes[rows, 3:6])
     count = nodes.view(np.int32)[rows, BINARY_COUNT]
     leaf = count > 0
     expected = (params.traversal_cost * area[~leaf].sum()
@@ -190,9 +194,6 @@ def test_reported_quality_matches_the_tree(count):
     assert np.isfinite(bvh.nodes[:, 0:WIDTH]).sum(axis=1).min() >= 2
 
 
-def half_area(lo, hi):
-    extent = np.asarray(hi, np.float64) - np.asarray(lo, np.float64)
-    return extent[0] * extent[1] + extent[1] * extent[2] + extent[2] * extent[0]
 
 
 def cheapest_collapse(nodes, params):
