@@ -3,7 +3,11 @@
 NumPy arrays in and out, compiled (Numba) kernels inside.
 """
 
-from raycore._threading import choose_layer
+from raycore._target import choose_target
+
+choose_target()  # before any kernel is declared, and before the layer (it reloads Numba's config)
+
+from raycore._threading import choose_layer  # noqa: E402
 
 choose_layer()  # before any parallel kernel is linked: TBB, else workqueue, never OpenMP
 

@@ -1,7 +1,8 @@
 """Keep Numba's on-disk kernel cache consistent with the sources.
 
 Numba's cache (``cache=True``, stored in ``__pycache__`` beside each module) is keyed by the
-modification time of the decorated function's own file only.  A kernel that inlines code from
+decorated function's own file only (a hash of its contents in Numba 0.68, its modification time
+before).  A kernel that inlines code from
 another module (the traversal inlines every primitive) is therefore reloaded stale after that
 other module changes.  At import, raycore hashes its sources and, when they differ from the ones
 the cache was built from, drops its cached kernels so that they are compiled afresh.  The test

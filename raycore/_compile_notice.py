@@ -17,25 +17,37 @@ MESSAGE = ("raycore: compiling kernels for this CPU, once (about half a minute f
 
 
 class CompileNotice(event.Listener):
-    """Prints :data:`MESSAGE` at the first compilation of a raycore kernel, then nothing."""
+    """Prints :data:`MESSAGE` at the first compilation of a raycore kernel, then nothing.
+
+    Attributes
+    ----------
+    compiled : list of str
+        Each raycore function compiled in this process (``module.qualname``), in order.
+    """
 
     def __init__(self, stream=None):
         self.stream = stream
-        self.shown = False
+        self.compiled = []
 
     def on_start(self, ev):
         # Numba compiles under its global compiler lock: no two threads get here at once.
         # Functions Numba makes itself (overload implementations) may have no module.
-        module = ev.data["dispatcher"].py_func.__module__ or ""
-        if self.shown or not module.startswith("raycore."):
+        function = ev.data["dispatcher"].py_func
+        module = function.__module__ or ""
+        if not module.startswith("raycore."):
             return
-        self.shown = True
-        print(MESSAGE, file=self.stream or sys.stderr, flush=True)
+        self.compiled.append(f"{module}.{function.__qualname__}")
+        if len(self.compiled) == 1:
+            print(MESSAGE, file=self.stream or sys.stderr, flush=True)
 
     def on_end(self, ev):
         pass
 
 
+#: The process's notice, listening from ``import raycore`` on.
+NOTICE = CompileNotice()
+
+
 def announce_compiles():
-    """Listen for raycore's first compilation in this process (once, at import)."""
-    event.register("numba:compile", CompileNotice())
+    """Listen for raycore's compilations in this process (once, at import)."""
+    event.register("numba:compile", NOTICE)

@@ -27,7 +27,10 @@ def info():
             Threads each parallel kernel runs on (``NUMBA_NUM_THREADS``, or
             ``numba.set_num_threads`` in this thread).
         ``cpu`` : str
-            The CPU the kernels are compiled for (``NUMBA_CPU_NAME``, else this machine's).
+            The CPU the kernels are compiled for: ``NUMBA_CPU_NAME``, which raycore sets to
+            the portable x86-64-v3 where it can (:mod:`raycore._target`), else this machine's.
+        ``host_cpu`` : str
+            This machine's CPU, as LLVM names it.
         ``simd`` : list of str
             Its vector instruction sets, as LLVM names them (``avx2``, ``avx512f``, ...).
         ``numba_cache_dir`` : str
@@ -45,6 +48,7 @@ def info():
         "fork_safe": fork_safe,
         "threads": numba.get_num_threads(),
         "cpu": config.CPU_NAME or llvm.get_host_cpu_name(),
+        "host_cpu": llvm.get_host_cpu_name(),
         "simd": simd_features(),
         "numba_cache_dir": FunctionCache(info).cache_path,
         "numba": numba.__version__,

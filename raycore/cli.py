@@ -12,7 +12,7 @@ import json
 import os
 import sys
 
-from raycore.commands import bench, cast, positive_int, render, user_error
+from raycore.commands import CommandError, bench, cast, positive_int, render, user_error
 
 #: Set to 1 to let unexpected errors through with their traceback (they are bugs: report them).
 TRACEBACK_VARIABLE = "RAYCORE_TRACEBACK"
@@ -56,18 +56,22 @@ def _info(args):
                                       ("fork-safe", report["fork_safe"])) if safe]
     print(f"threading layer   {report['threading_layer']} ({', '.join(safety) or 'unsafe'})")
     print(f"threads           {report['threads']}")
-    print(f"cpu               {report['cpu']}")
+    print(f"cpu               {report['cpu']} (this machine: {report['host_cpu']})")
     print(f"simd              {' '.join(report['simd']) or 'none'}")
     print(f"numba cache       {report['numba_cache_dir']}")
     print(f"numba             {report['numba']}")
 
 
 def _warmup(args):
+    from raycore._compile_notice import NOTICE
     from raycore._warmup import DTYPES, warm_up
 
     dtypes = DTYPES if args.dtype == "both" else (args.dtype,)
     seconds = warm_up(dtypes)
     print(f"raycore warmup: done in {seconds:.1f} s")
+    if args.expect_cached and NOTICE.compiled:
+        raise CommandError(f"{len(NOTICE.compiled)} kernels were compiled, not loaded from "
+                           f"the cache, the first {NOTICE.compiled[0]}")
 
 
 def build_parser():
@@ -95,6 +99,9 @@ def build_parser():
         "warmup", help="compile every kernel ahead of use, into Numba's cache")
     warmup.add_argument("--dtype", default="both", choices=["float32", "float64", "both"],
                         help="precision of the scenes to compile for (default: both)")
+    warmup.add_argument("--expect-cached", action="store_true",
+                        help="fail if any kernel has to be compiled rather than loaded from "
+                             "the cache (checks a cache that was shipped or warmed before)")
     warmup.set_defaults(run=_warmup)
     for command in (render, cast, bench):
         command.add_parser(commands)
