@@ -8,7 +8,7 @@ PORT   ?= 8000
 # pytest's arguments: every test by default
 TESTS  ?=
 
-.PHONY: run test test-py313 fuzz load bench chart openapi lint clean image-test
+.PHONY: run test test-py313 fuzz load bench chart openapi lint clean image-test wheel
 
 # One stamp per set of extras, so that `make test` does not pull in the benchmark stack.
 $(BIN)/python:
@@ -45,7 +45,7 @@ PYTHON313 ?= $(or $(shell python3.13 -c 'import sys; print(sys.executable)' 2>/d
 	$(lastword $(sort $(wildcard $(shell pyenv root 2>/dev/null)/versions/3.13*/bin/python3.13))))
 PY313_TESTS ?= tests/scene tests/bvh tests/service tests/test_camera.py tests/test_sensors.py tests/test_offset.py \
 	tests/test_render.py tests/test_threading.py tests/test_info.py tests/test_compile_notice.py tests/test_warmup.py \
-	tests/test_ray_bounds.py tests/commands tests/integrations/test_trimesh.py \
+	tests/test_ray_bounds.py tests/test_target.py tests/commands tests/integrations/test_trimesh.py \
 	tests/integrations/test_dask.py \
 	--ignore tests/service/test_schemathesis.py --ignore tests/service/test_fuzz.py
 test-py313:
@@ -98,6 +98,15 @@ image-test:
 	@command -v podman >/dev/null && command -v debootstrap >/dev/null || \
 	    (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq podman debootstrap)
 	$(PYTHON) docker/image_test.py
+
+# dist/raycore-*.whl with raycore's kernels compiled in it (release/ship_kernels.py, for the
+# portable x86-64-v3 target), so that a first answer after `pip install` loads them: one Python
+# version per interpreter in WHEEL_PYTHONS, each in an environment with raycore's dependencies
+# (make wheel WHEEL_PYTHONS=".venv/bin/python .venv-py313/bin/python").  About 4 minutes a
+# Python on 2 cores.
+WHEEL_PYTHONS ?= $(BIN)/python
+wheel: $(VENV)/.dev-installed
+	$(BIN)/python release/ship_kernels.py --dest dist --python $(WHEEL_PYTHONS)
 
 lint: $(VENV)/.dev-installed
 	$(BIN)/ruff check .

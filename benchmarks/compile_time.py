@@ -9,7 +9,11 @@ what a user meets after ``pip install``:
   512-triangle mesh, build it (or let ``intersect`` build it), cast 10 float32 rays; the wall time
   of the whole process, as the user waits for it, and its parts;
 * ``warmup``: ``raycore warmup --dtype float32``, in a cache of its own;
-* ``warm``: the first-answer script, then warmup again, in warmup's cache.
+* ``warm``: the first-answer script, then warmup again, in warmup's cache;
+* ``shipped``: the first answers and the warm-up again, each in a fresh process, in a new virtual
+  environment where the wheel that carries the kernels (``make wheel``,
+  release/ship_kernels.py) is installed, with no Numba cache on the machine for it: what a user
+  of that wheel meets after ``pip install``.
 
 Per kernel, "cold" is the seconds Numba spent compiling it during warmup (its compile events,
 less the kernels compiled inside it), summed over its signatures; "warm" is the seconds its
@@ -28,6 +32,7 @@ from collections import defaultdict
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results" / "compile.json"
+SHIP = Path(__file__).resolve().parents[1] / "release" / "ship_kernels.py"
 #: Cells per side of the first answer's grid mesh: 2 * 16**2 = 512 triangles.
 GRID = 16
 RAYS = 10
@@ -137,13 +142,20 @@ def _child(mode):
     print(json.dumps(figures))
 
 
-def _run(mode, cache):
-    """Figures of ``_child(mode)`` in a fresh process on Numba cache ``cache``, with the wall
-    time of the whole process (``process_s``)."""
-    environment = {**os.environ, "NUMBA_CACHE_DIR": cache}
+def _run(mode, cache=None, python=sys.executable):
+    """Figures of ``_child(mode)`` in a fresh process of ``python`` on Numba cache ``cache``
+    (None: the one beside raycore's sources), with the wall time of the whole process
+    (``process_s``)."""
+    # this file runs by its path (it imports nothing but the standard library at the top), in
+    # an empty folder, so that the interpreter's own raycore is the one measured
+    environment = {key: value for key, value in os.environ.items()
+                   if key not in ("NUMBA_CACHE_DIR", "NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES")}
+    if cache is not None:
+        environment["NUMBA_CACHE_DIR"] = cache
     began = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "benchmarks.compile_time", "--child", mode],
-                          env=environment, capture_output=True, text=True, check=True)
+    with tempfile.TemporaryDirectory() as empty:
+        done = subprocess.run([python, __file__, "--child", mode], cwd=empty, env=environment,
+                              capture_output=True, text=True, check=True)
     figures = json.loads(done.stdout.splitlines()[-1])
     figures["process_s"] = time.perf_counter() - began
     return figures
@@ -158,6 +170,14 @@ def measure():
             "warmup": _run("warmup", warmed),
             "warm": _run("warm", warmed),
         }
+    with tempfile.TemporaryDirectory() as shipped:
+        began = time.perf_counter()
+        subprocess.run([sys.executable, str(SHIP), "--dest", f"{shipped}/dist",
+                        "--install-into", f"{shipped}/venv"], capture_output=True, check=True)
+        document["make_wheel_s"] = time.perf_counter() - began
+        python = f"{shipped}/venv/bin/python"
+        document["shipped"] = {mode: _run(mode, python=python) for mode in
+                               ("answer-build", "answer-intersect", "warmup")}
     document.update(machine_cpus=os.cpu_count(), load_average=os.getloadavg(),
                     python=sys.version.split()[0], triangles=2 * GRID**2, rays=RAYS)
     return document
@@ -173,6 +193,9 @@ def _report(document):
     print(f"{'warmup --dtype float32':30s} process {warmup['process_s']:6.1f} s  (compiling "
           f"{sum(warmup['compile_s'].values()):.1f} s); warm cache: {warm['warmup_s']:.1f} s, "
           f"loading {sum(warm['load_s'].values()):.1f} s")
+    for mode, row in document["shipped"].items():
+        print(f"{'wheel with kernels, ' + mode:30s} process {row['process_s']:6.1f} s  "
+              f"(compiling {sum(row['compile_s'].values()):.1f} s)")
     cold = warmup["compile_s"]
     print(f"\n{'kernel':56s} {'cold s':>7s} {'warm ms':>8s}")
     for name in sorted(cold, key=cold.get, reverse=True)[:TOP]:

@@ -1,0 +1,145 @@
+"""Put raycore's compiled kernels into its wheel (``make wheel``).
+
+Installed from a plain wheel, raycore compiles its kernels at their first use: half a minute
+before a first answer, two minutes for ``raycore warmup``.  A wheel from this script carries
+them, and a first answer after ``pip install`` loads them instead (README, "Install").
+
+Numba keys a cached kernel on the Python version, Numba's version, the contents of the source
+file, the argument types and the CPU it was compiled for (raycore's kernels are compiled for the
+portable x86-64-v3 level: :mod:`raycore._target`).  The kernels made here are therefore loaded
+on any x86-64-v3 machine that runs the same Python and Numba versions; elsewhere Numba passes
+them over and compiles at first use, as without them.
+
+For each interpreter given (each with raycore's dependencies installed, as a project virtual
+environment has them):
+
+1. the wheel is unpacked into a temporary folder;
+2. ``raycore warmup`` runs on the unpacked package in a fresh process, which writes the kernels
+   into the package's ``__pycache__`` folders (``NUMBA_CACHE_DIR`` and ``NUMBA_CPU_*`` removed
+   from its environment, so that they land there and for the portable target);
+3. ``raycore warmup --expect-cached`` runs in another fresh process, and fails if any kernel
+   compiles rather than loads.
+
+Then the wheel is packed again with the kernels (``wheel pack``, which writes its RECORD), in
+place of the plain one.  Usage (``--install-into`` tries it as a user would: a new virtual
+environment with the wheel installed from it, its dependencies from the package index)::
+
+    python release/ship_kernels.py [--dest dist] [--dtype both] \\
+        [--python .venv/bin/python .venv-py313/bin/python] [--install-into DIR]
+
+Numba stamps a source file by its contents from version 0.68 on; earlier versions stamp its
+modification time, which an installation does not keep, and would pass the kernels over.
+"""
+
+import argparse
+import glob
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+
+#: What the kernels of one folder are: Numba's index and data files, and raycore's stamp of
+#: the sources they were compiled from (raycore._cache).
+KERNEL_FILES = ("*.nbi", "*.nbc", "kernel-sources.sha256")
+#: Settings that would put the kernels elsewhere, or compile them for another CPU.
+DROPPED_SETTINGS = ("NUMBA_CACHE_DIR", "NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "PYTHONPATH")
+
+
+def _run(command, cwd, env):
+    print("+", " ".join(map(str, command)), flush=True)
+    subprocess.run(command, cwd=cwd, env=env, check=True)
+
+
+def compile_into(package_root, python, dtype):
+    """Compile raycore's kernels into the unpacked wheel at ``package_root`` with interpreter
+    ``python``, then check that a fresh process loads every one of them."""
+    env = {key: value for key, value in os.environ.items() if key not in DROPPED_SETTINGS}
+    env["PYTHONPATH"] = str(package_root)
+    # the interpreter must import the unpacked package (not an installed raycore) and compile
+    # for the portable target
+    check = ("import raycore, raycore._target as target; "
+             f"assert raycore.__file__.startswith({str(package_root)!r}), raycore.__file__; "
+             "assert raycore.info()['cpu'] == target.PORTABLE_CPU, "
+             "'this machine cannot compile for ' + target.PORTABLE_CPU")
+    with tempfile.TemporaryDirectory() as elsewhere:  # not the repository: its raycore
+        _run([python, "-c", check], elsewhere, env)
+        _run([python, "-m", "raycore.cli", "warmup", "--dtype", dtype], elsewhere, env)
+        _run([python, "-m", "raycore.cli", "warmup", "--dtype", dtype, "--expect-cached"],
+             elsewhere, env)
+
+
+def kernel_files(package_root):
+    """The kernel files under ``package_root/raycore``."""
+    return sorted(path for pattern in KERNEL_FILES
+                  for path in (package_root / "raycore").rglob(f"__pycache__/{pattern}"))
+
+
+def ship_kernels(wheel, pythons, dtype="both"):
+    """Replace ``wheel`` (a path) by the same wheel with raycore's kernels compiled by each of
+    ``pythons``; returns the number of kernel files it carries."""
+    wheel = Path(wheel).resolve()
+    with tempfile.TemporaryDirectory() as scratch:
+        scratch = Path(scratch)
+        _run([sys.executable, "-m", "wheel", "unpack", "--dest", scratch, wheel], scratch, None)
+        (unpacked,) = [path for path in scratch.iterdir() if path.is_dir()]
+        # keep the kernels only: the interpreters' bytecode is pip's to write on install
+        pristine = {path for path in unpacked.rglob("*") if path.is_file()}
+        for python in pythons:
+            compile_into(unpacked, python, dtype)
+        kernels = kernel_files(unpacked)
+        for path in unpacked.rglob("*"):
+            if path.is_file() and path not in pristine and path not in kernels:
+                path.unlink()
+        packed = scratch / "packed"
+        packed.mkdir()
+        _run([sys.executable, "-m", "wheel", "pack", "--dest-dir", packed, unpacked], scratch,
+             None)
+        (built,) = packed.iterdir()
+        shutil.move(built, wheel)
+    return len(kernels)
+
+
+def build_wheel(dest):
+    """Build raycore's plain wheel from the repository into the empty folder ``dest``; returns
+    its path."""
+    # setuptools builds in the repository's build/, and keeps there what the sources dropped
+    shutil.rmtree(REPOSITORY / "build", ignore_errors=True)
+    _run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--wheel-dir", dest,
+          REPOSITORY], REPOSITORY, None)
+    (wheel,) = glob.glob(os.path.join(dest, "raycore-*.whl"))
+    return wheel
+
+
+def install_into(folder, wheel):
+    """A new virtual environment at ``folder`` with ``wheel`` installed; returns its python."""
+    _run([sys.executable, "-m", "venv", folder], None, None)
+    python = os.path.join(folder, "bin", "python")
+    _run([python, "-m", "pip", "install", "--quiet", wheel], None, None)
+    return python
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--dest", default="dist", help="folder for the wheel (emptied first)")
+    parser.add_argument("--python", nargs="+", default=[sys.executable],
+                        help="interpreters to compile with, one per Python version to serve "
+                             "(default: this one)")
+    parser.add_argument("--dtype", default="both", choices=["float32", "float64", "both"])
+    parser.add_argument("--install-into", metavar="DIR",
+                        help="then install the wheel in a new virtual environment at DIR")
+    args = parser.parse_args(argv)
+    shutil.rmtree(args.dest, ignore_errors=True)
+    os.makedirs(args.dest)
+    wheel = build_wheel(args.dest)
+    count = ship_kernels(wheel, args.python, args.dtype)
+    print(f"{wheel}: {count} kernel files added", flush=True)
+    if args.install_into:
+        install_into(args.install_into, wheel)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,71 @@
+"""The wheel that carries raycore's compiled kernels (``make wheel``, release/ship_kernels.py).
+
+Installed in a new virtual environment, with its dependencies from the package index and no
+Numba cache on the machine for it, a first answer loads every kernel it needs from the wheel
+and compiles none: with ``build()`` called first, and when ``intersect`` builds the scene.  The
+wheel here carries the float32 kernels (the script's), compiled by this interpreter."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from raycore._compile_notice import MESSAGE
+from raycore._target import PORTABLE_CPU, host_runs_portable_code
+
+SHIP = Path(__file__).resolve().parents[1] / "release" / "ship_kernels.py"
+
+#: A 512-triangle grid in the z = 0 plane, ten rays straight down onto it from z = 5.
+SCRIPT = """
+import json, sys
+import numpy as np
+import raycore
+from raycore._compile_notice import NOTICE
+
+u, v = np.meshgrid(np.linspace(0, 1, 17), np.linspace(0, 1, 17))
+vertices = np.column_stack([u.ravel(), v.ravel(), np.zeros(u.size)])
+corner = (np.arange(16)[:, None] * 17 + np.arange(16)).ravel()
+faces = np.concatenate([np.column_stack([corner, corner + 1, corner + 18]),
+                        np.column_stack([corner, corner + 18, corner + 17])])
+scene = raycore.Scene("float32")
+scene.add_mesh(vertices, faces)
+if sys.argv[1] == "build":
+    scene.build()
+origins = np.column_stack([np.linspace(0.05, 0.95, 10), np.full(10, 0.3), np.full(10, 5.0)])
+hits = scene.intersect(origins.astype(np.float32), np.tile(np.float32([0, 0, -1]), (10, 1)))
+print(json.dumps({"t": hits.t.tolist(), "geom_id": hits.geom_id.tolist(),
+                  "compiled": NOTICE.compiled, "cpu": raycore.info()["cpu"],
+                  "module": raycore.__file__}))
+"""
+
+
+@pytest.fixture(scope="module")
+def wheel_python(tmp_path_factory):
+    if not host_runs_portable_code():
+        pytest.skip(f"this machine cannot run {PORTABLE_CPU} code, which the wheel ships")
+    folder = tmp_path_factory.mktemp("wheel")
+    run = subprocess.run([sys.executable, str(SHIP), "--dest", str(folder / "dist"), "--dtype",
+                          "float32", "--install-into", str(folder / "venv")],
+                         capture_output=True, text=True, timeout=1800)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+    return folder / "venv"
+
+
+@pytest.mark.parametrize("how", ["build", "intersect builds"])
+def test_a_first_answer_from_the_wheel_compiles_nothing(wheel_python, how, tmp_path):
+    environment = {key: value for key, value in os.environ.items()
+                   if not key.startswith(("NUMBA_", "PYTHON"))}
+    run = subprocess.run([str(wheel_python / "bin" / "python"), "-c", SCRIPT, how],
+                         cwd=tmp_path, env=environment, capture_output=True, text=True,
+                         timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    answer = json.loads(run.stdout.splitlines()[-1])
+    assert answer["module"].startswith(str(wheel_python))  # the installed wheel, not the tree
+    assert answer["cpu"] == PORTABLE_CPU
+    assert answer["compiled"] == [] and MESSAGE not in run.stderr, run.stderr[-3000:]
+    assert np.all(np.array(answer["geom_id"]) == 0)
+    np.testing.assert_array_equal(answer["t"], 5.0)  # z = 5 to z = 0: exact in float32
