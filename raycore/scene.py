@@ -16,7 +16,7 @@ from raycore._memory import empty_on_line
 from raycore.bvh.build import BuildParams
 from raycore.bvh.layout import NODE_WIDTH, build_bvh
 from raycore.bvh.leaves import empty_blocks
-from raycore.bvh.record import SceneRecord
+from raycore.bvh.record import new_record
 from raycore.bvh.traverse import MESH
 from raycore.hits import AllHits, Hits, SurfaceHits, check_fields
 from raycore.integrations import open3d as _open3d
@@ -76,7 +76,7 @@ class Scene:
         self._params = []  # (20,) float64 rows of analytic shapes
         self._xforms = []  # (3, 4) float64 object-from-world matrices of instances
         self._placement = {}  # instance object -> (4x4 world-from-object matrix, world bounds)
-        self._record = None  # SceneRecord of the built scene
+        self._record = None  # the built scene's SceneRecord (raycore.bvh.record)
         self._build_lock = threading.Lock()
         self._top = None  # BVH over the bounded objects, once built
         self._top_slots = None  # (S,) int64: the object in each of the top tree's leaf slots
@@ -236,7 +236,7 @@ class Scene:
         mesh_nodes = _joined([m.bvh.nodes for m in self._meshes]) if blocks else empty_nodes
         all_blocks = _joined(blocks) if blocks else empty_blocks(0, dtype)
         table = np.array(self._params, dtype=dtype).reshape(-1, analytic.PARAM_WIDTH)
-        record = SceneRecord(
+        record = new_record(
             top_nodes, top_nodes.view(np.int32), self._top_slots, self._direct,
             np.array(self._kind, np.int64), np.array(self._param_row, np.int64),
             np.array(self._mesh_of, np.int64), np.array(self._xform_row, np.int64),
