@@ -22,11 +22,14 @@ class CompileNotice(event.Listener):
     Attributes
     ----------
     compiled : list of str
-        Each raycore function compiled in this process (``module.qualname``), in order.
+        Each function compiled in this process since ``import raycore`` (``module.qualname``),
+        in order: raycore's kernels, and what Numba compiles for them outside raycore's modules
+        (such as a structref's constructor called from Python, which Numba does not cache).
     """
 
     def __init__(self, stream=None):
         self.stream = stream
+        self.shown = False
         self.compiled = []
 
     def on_start(self, ev):
@@ -34,10 +37,9 @@ class CompileNotice(event.Listener):
         # Functions Numba makes itself (overload implementations) may have no module.
         function = ev.data["dispatcher"].py_func
         module = function.__module__ or ""
-        if not module.startswith("raycore."):
-            return
         self.compiled.append(f"{module}.{function.__qualname__}")
-        if len(self.compiled) == 1:
+        if module.startswith("raycore.") and not self.shown:
+            self.shown = True
             print(MESSAGE, file=self.stream or sys.stderr, flush=True)
 
     def on_end(self, ev):

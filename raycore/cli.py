@@ -70,7 +70,7 @@ def _warmup(args):
     seconds = warm_up(dtypes)
     print(f"raycore warmup: done in {seconds:.1f} s")
     if args.expect_cached and NOTICE.compiled:
-        raise CommandError(f"{len(NOTICE.compiled)} kernels were compiled, not loaded from "
+        raise CommandError(f"{len(NOTICE.compiled)} functions were compiled, not loaded from "
                            f"the cache, the first {NOTICE.compiled[0]}")
 
 
