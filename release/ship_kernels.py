@@ -22,7 +22,8 @@ environment has them):
 
 Then the wheel is packed again with the kernels (``wheel pack``, which writes its RECORD), in
 place of the plain one.  Usage (``--install-into`` tries it as a user would: a new virtual
-environment with the wheel installed from it, its dependencies from the package index)::
+environment with the wheel and its service extra installed, the dependencies from the package
+index)::
 
     python release/ship_kernels.py [--dest dist] [--dtype both] \\
         [--python .venv/bin/python .venv-py313/bin/python] [--install-into DIR]
@@ -104,21 +105,22 @@ def ship_kernels(wheel, pythons, dtype="both"):
 
 
 def build_wheel(dest):
-    """Build raycore's plain wheel from the repository into the empty folder ``dest``; returns
-    its path."""
+    """Build raycore's plain wheel from the repository into the empty folder ``dest``
+    (``python -m build``); returns its path."""
     # setuptools builds in the repository's build/, and keeps there what the sources dropped
     shutil.rmtree(REPOSITORY / "build", ignore_errors=True)
-    _run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--wheel-dir", dest,
-          REPOSITORY], REPOSITORY, None)
+    _run([sys.executable, "-m", "build", "--wheel", "--outdir", dest, REPOSITORY], REPOSITORY,
+         None)
     (wheel,) = glob.glob(os.path.join(dest, "raycore-*.whl"))
     return wheel
 
 
 def install_into(folder, wheel):
-    """A new virtual environment at ``folder`` with ``wheel`` installed; returns its python."""
+    """A new virtual environment at ``folder`` with ``wheel`` installed with its service extra
+    (``pip install "raycore[service]"``, from the wheel); returns its python."""
     _run([sys.executable, "-m", "venv", folder], None, None)
     python = os.path.join(folder, "bin", "python")
-    _run([python, "-m", "pip", "install", "--quiet", wheel], None, None)
+    _run([python, "-m", "pip", "install", "--quiet", f"{wheel}[service]"], None, None)
     return python
 
 
@@ -130,7 +132,8 @@ def main(argv=None):
                              "(default: this one)")
     parser.add_argument("--dtype", default="both", choices=["float32", "float64", "both"])
     parser.add_argument("--install-into", metavar="DIR",
-                        help="then install the wheel in a new virtual environment at DIR")
+                        help="then install the wheel, with its service extra, in a new virtual "
+                             "environment at DIR")
     args = parser.parse_args(argv)
     shutil.rmtree(args.dest, ignore_errors=True)
     os.makedirs(args.dest)

@@ -47,13 +47,14 @@ def running_service(environment=None, startup_seconds=600, workers=None):
 
 
 @contextmanager
-def service_process(environment=None, startup_seconds=600, workers=None):
+def service_process(environment=None, startup_seconds=600, workers=None, command=None):
     """:func:`running_service`, yielding ``(process, url)``: a test may kill the process
     (``kill -9``); one that is still running at the end is stopped with SIGINT and must exit
-    cleanly."""
+    cleanly.  ``command`` is the ``raycore`` command to run (default: the one installed beside
+    this interpreter)."""
     port = free_port()
-    command = [str(Path(sys.executable).with_name("raycore")), "serve", "--host", "127.0.0.1",
-               "--port", str(port), "--log-level", "warning"]
+    command = [str(command or Path(sys.executable).with_name("raycore")), "serve", "--host",
+               "127.0.0.1", "--port", str(port), "--log-level", "warning"]
     if workers is not None:
         command += ["--workers", str(workers)]
     with tempfile.TemporaryFile() as log:

@@ -1,9 +1,11 @@
 """The wheel that carries raycore's compiled kernels (``make wheel``, release/ship_kernels.py).
 
-Installed in a new virtual environment, with its dependencies from the package index and no
-Numba cache on the machine for it, a first answer loads every kernel it needs from the wheel
-and compiles none: with ``build()`` called first, and when ``intersect`` builds the scene.  The
-wheel here carries the float32 kernels (the script's), compiled by this interpreter."""
+Built by ``python -m build`` and installed with its service extra in a new virtual environment,
+with its dependencies from the package index and no Numba cache on the machine for it, a first
+answer loads every kernel it needs from the wheel and compiles none: with ``build()`` called
+first, and when ``intersect`` builds the scene; and ``raycore serve`` serves the demo scene.
+The wheel here carries the float32 kernels (the script's and the demo's), compiled by this
+interpreter."""
 
 import json
 import os
@@ -11,11 +13,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import httpx
 import numpy as np
 import pytest
 
 from raycore._compile_notice import MESSAGE
 from raycore._target import PORTABLE_CPU, host_runs_portable_code
+from service.process import service_process
 
 SHIP = Path(__file__).resolve().parents[1] / "release" / "ship_kernels.py"
 
@@ -44,7 +48,7 @@ print(json.dumps({"t": hits.t.tolist(), "geom_id": hits.geom_id.tolist(),
 
 
 @pytest.fixture(scope="module")
-def wheel_python(tmp_path_factory):
+def wheel_environment(tmp_path_factory):
     if not host_runs_portable_code():
         pytest.skip(f"this machine cannot run {PORTABLE_CPU} code, which the wheel ships")
     folder = tmp_path_factory.mktemp("wheel")
@@ -56,16 +60,32 @@ def wheel_python(tmp_path_factory):
 
 
 @pytest.mark.parametrize("how", ["build", "intersect builds"])
-def test_a_first_answer_from_the_wheel_compiles_nothing(wheel_python, how, tmp_path):
-    environment = {key: value for key, value in os.environ.items()
-                   if not key.startswith(("NUMBA_", "PYTHON"))}
-    run = subprocess.run([str(wheel_python / "bin" / "python"), "-c", SCRIPT, how],
-                         cwd=tmp_path, env=environment, capture_output=True, text=True,
+def test_a_first_answer_from_the_wheel_compiles_nothing(wheel_environment, how, tmp_path):
+    run = subprocess.run([str(wheel_environment / "bin" / "python"), "-c", SCRIPT, how],
+                         cwd=tmp_path, env=_user_environment(), capture_output=True, text=True,
                          timeout=600)
     assert run.returncode == 0, run.stderr[-3000:]
     answer = json.loads(run.stdout.splitlines()[-1])
-    assert answer["module"].startswith(str(wheel_python))  # the installed wheel, not the tree
+    assert answer["module"].startswith(str(wheel_environment))  # the wheel, not the tree
     assert answer["cpu"] == PORTABLE_CPU
     assert answer["compiled"] == [] and MESSAGE not in run.stderr, run.stderr[-3000:]
     assert np.all(np.array(answer["geom_id"]) == 0)
     np.testing.assert_array_equal(answer["t"], 5.0)  # z = 5 to z = 0: exact in float32
+
+
+def test_the_wheel_serves_the_demo(wheel_environment):
+    command = wheel_environment / "bin" / "raycore"
+    with service_process(startup_seconds=120, command=command) as (_, url):
+        camera = {"type": "perspective", "position": [7, 5, -9], "look_at": [0, 1, 0],
+                  "width": 32, "height": 24}
+        response = httpx.post(f"{url}/v1/scenes/demo/render", json={"camera": camera},
+                              timeout=60)
+    assert response.status_code == 200, response.text
+    assert response.content.startswith(b"\x89PNG\r\n\x1a\n")
+
+
+def _user_environment():
+    """This environment without Numba's settings (this process's raycore set its CPU) and
+    Python's path: what a user's shell would give the installed wheel."""
+    return {key: value for key, value in os.environ.items()
+            if not key.startswith(("NUMBA_", "PYTHON"))}
