@@ -46,20 +46,23 @@ REPOSITORY = Path(__file__).resolve().parents[1]
 #: What the kernels of one folder are: Numba's index and data files, and raycore's stamp of
 #: the sources they were compiled from (raycore._cache).
 KERNEL_FILES = ("*.nbi", "*.nbc", "kernel-sources.sha256")
-#: Settings that would put the kernels elsewhere, or compile them for another CPU.
+#: Settings left out of every step's environment: they would put the kernels elsewhere, compile
+#: them for another CPU, or show pip another raycore (a checkout on PYTHONPATH, whose metadata
+#: says raycore is installed already).
 DROPPED_SETTINGS = ("NUMBA_CACHE_DIR", "NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "PYTHONPATH")
 
 
-def _run(command, cwd, env):
+def _run(command, cwd, **settings):
+    """Run ``command`` in ``cwd``, in this environment less DROPPED_SETTINGS, plus
+    ``settings``."""
+    env = {key: value for key, value in os.environ.items() if key not in DROPPED_SETTINGS}
     print("+", " ".join(map(str, command)), flush=True)
-    subprocess.run(command, cwd=cwd, env=env, check=True)
+    subprocess.run(command, cwd=cwd, env={**env, **settings}, check=True)
 
 
 def compile_into(package_root, python, dtype):
     """Compile raycore's kernels into the unpacked wheel at ``package_root`` with interpreter
     ``python``, then check that a fresh process loads every one of them."""
-    env = {key: value for key, value in os.environ.items() if key not in DROPPED_SETTINGS}
-    env["PYTHONPATH"] = str(package_root)
     # the interpreter must import the unpacked package (not an installed raycore) and compile
     # for the portable target
     check = ("import raycore, raycore._target as target; "
@@ -67,10 +70,9 @@ def compile_into(package_root, python, dtype):
              "assert raycore.info()['cpu'] == target.PORTABLE_CPU, "
              "'this machine cannot compile for ' + target.PORTABLE_CPU")
     with tempfile.TemporaryDirectory() as elsewhere:  # not the repository: its raycore
-        _run([python, "-c", check], elsewhere, env)
-        _run([python, "-m", "raycore.cli", "warmup", "--dtype", dtype], elsewhere, env)
-        _run([python, "-m", "raycore.cli", "warmup", "--dtype", dtype, "--expect-cached"],
-             elsewhere, env)
+        for command in (["-c", check], ["-m", "raycore.cli", "warmup", "--dtype", dtype],
+                        ["-m", "raycore.cli", "warmup", "--dtype", dtype, "--expect-cached"]):
+            _run([python, *command], elsewhere, PYTHONPATH=str(package_root))
 
 
 def kernel_files(package_root):
@@ -85,7 +87,7 @@ def ship_kernels(wheel, pythons, dtype="both"):
     wheel = Path(wheel).resolve()
     with tempfile.TemporaryDirectory() as scratch:
         scratch = Path(scratch)
-        _run([sys.executable, "-m", "wheel", "unpack", "--dest", scratch, wheel], scratch, None)
+        _run([sys.executable, "-m", "wheel", "unpack", "--dest", scratch, wheel], scratch)
         (unpacked,) = [path for path in scratch.iterdir() if path.is_dir()]
         # keep the kernels only: the interpreters' bytecode is pip's to write on install
         pristine = {path for path in unpacked.rglob("*") if path.is_file()}
@@ -97,8 +99,7 @@ def ship_kernels(wheel, pythons, dtype="both"):
                 path.unlink()
         packed = scratch / "packed"
         packed.mkdir()
-        _run([sys.executable, "-m", "wheel", "pack", "--dest-dir", packed, unpacked], scratch,
-             None)
+        _run([sys.executable, "-m", "wheel", "pack", "--dest-dir", packed, unpacked], scratch)
         (built,) = packed.iterdir()
         shutil.move(built, wheel)
     return len(kernels)
@@ -109,8 +110,7 @@ def build_wheel(dest):
     (``python -m build``); returns its path."""
     # setuptools builds in the repository's build/, and keeps there what the sources dropped
     shutil.rmtree(REPOSITORY / "build", ignore_errors=True)
-    _run([sys.executable, "-m", "build", "--wheel", "--outdir", dest, REPOSITORY], REPOSITORY,
-         None)
+    _run([sys.executable, "-m", "build", "--wheel", "--outdir", dest, REPOSITORY], REPOSITORY)
     (wheel,) = glob.glob(os.path.join(dest, "raycore-*.whl"))
     return wheel
 
@@ -118,9 +118,12 @@ def build_wheel(dest):
 def install_into(folder, wheel):
     """A new virtual environment at ``folder`` with ``wheel`` installed with its service extra
     (``pip install "raycore[service]"``, from the wheel); returns its python."""
-    _run([sys.executable, "-m", "venv", folder], None, None)
+    _run([sys.executable, "-m", "venv", folder], None)
     python = os.path.join(folder, "bin", "python")
-    _run([python, "-m", "pip", "install", "--quiet", f"{wheel}[service]"], None, None)
+    _run([python, "-m", "pip", "install", "--quiet", f"{wheel}[service]"], None)
+    with tempfile.TemporaryDirectory() as elsewhere:  # the installed raycore, not another
+        _run([python, "-c", "import raycore, sys; "
+              "assert raycore.__file__.startswith(sys.prefix), raycore.__file__"], elsewhere)
     return python
 
 
