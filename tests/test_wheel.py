@@ -4,13 +4,16 @@ Built by ``python -m build`` and installed with its service extra in a new virtu
 with its dependencies from the package index and no Numba cache on the machine for it, a first
 answer loads every kernel it needs from the wheel and compiles none: with ``build()`` called
 first, and when ``intersect`` builds the scene; and ``raycore serve`` serves the demo scene.
-The wheel here carries the float32 kernels (the script's and the demo's), compiled by this
-interpreter."""
+Every kernel in it is keyed on the portable target only, so another x86-64-v3 machine loads
+it as this one does (only one machine is at hand).  The wheel here carries the float32 kernels
+(the script's and the demo's), compiled by this interpreter."""
 
 import json
 import os
+import pickle
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import httpx
@@ -18,7 +21,7 @@ import numpy as np
 import pytest
 
 from raycore._compile_notice import MESSAGE
-from raycore._target import PORTABLE_CPU, host_runs_portable_code
+from raycore._target import PORTABLE_CPU, PORTABLE_FEATURES, host_runs_portable_code
 from service.process import service_process
 
 SHIP = Path(__file__).resolve().parents[1] / "release" / "ship_kernels.py"
@@ -57,6 +60,27 @@ def wheel_environment(tmp_path_factory):
                          capture_output=True, text=True, timeout=1800)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     return folder / "venv"
+
+
+@pytest.fixture(scope="module")
+def wheel_file(wheel_environment):
+    (wheel,) = (wheel_environment.parent / "dist").glob("raycore-*.whl")
+    return wheel
+
+
+def test_the_wheels_kernels_are_keyed_on_nothing_of_this_machine(wheel_file):
+    # Numba loads a cached kernel where its index key's codegen part (target triple, CPU name,
+    # CPU features) equals the running process's: here the portable target's, on any machine
+    keys = []
+    with zipfile.ZipFile(wheel_file) as wheel:
+        for name in wheel.namelist():
+            if name.endswith(".nbi"):
+                with wheel.open(name) as index:
+                    pickle.load(index)  # Numba's version
+                    _, overloads = pickle.loads(index.read())
+                keys += [key[1] for key in overloads]
+    assert len(keys) > 50
+    assert {codegen[1:] for codegen in keys} == {(PORTABLE_CPU, PORTABLE_FEATURES)}
 
 
 @pytest.mark.parametrize("how", ["build", "intersect builds"])
