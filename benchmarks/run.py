@@ -64,6 +64,9 @@ from benchmarks.rays import (
 from benchmarks.timing import best_time, interleaved_best_times  # noqa: F401
 
 RESULTS = Path(__file__).resolve().parent / "results"
+#: The checkout, where the benchmark's subprocesses (``python -m benchmarks...``) run, so that
+#: they find the benchmarks whatever the caller's working directory (``raycore bench``).
+CHECKOUT = Path(__file__).resolve().parents[1]
 DTYPES = (np.float32, np.float64)
 #: Meshes of at least this many triangles are "large": fewer rays and build rounds, so that a
 #: full run fits in about 15 minutes on 2 cores (a large mesh's call still takes >= 50 ms)
@@ -141,7 +144,7 @@ def build_memory(mesh_name):
     for contender in ("raycore", "open3d", "embreex"):
         answer = subprocess.run(
             [sys.executable, "-m", "benchmarks.build_memory", mesh_name, contender],
-            capture_output=True, text=True, check=True, env=os.environ)
+            capture_output=True, text=True, check=True, cwd=CHECKOUT)
         out[contender] = json.loads(answer.stdout.splitlines()[-1])
     return out
 
@@ -313,7 +316,8 @@ def one_thread_run(names, quick, rounds):
         path = Path(folder) / "one-thread.json"
         command = [sys.executable, "-m", "benchmarks.run", "--one-thread-output", str(path),
                    "--rounds", str(rounds), "--meshes", *names] + ["--quick"] * quick
-        subprocess.run(command, check=True, env={**os.environ, "NUMBA_NUM_THREADS": "1"})
+        subprocess.run(command, check=True, cwd=CHECKOUT,
+                       env={**os.environ, "NUMBA_NUM_THREADS": "1"})
         return json.loads(path.read_text())
 
 

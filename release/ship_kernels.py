@@ -33,7 +33,6 @@ modification time, which an installation does not keep, and would pass the kerne
 """
 
 import argparse
-import glob
 import os
 import shutil
 import subprocess
@@ -65,14 +64,20 @@ def compile_into(package_root, python, dtype):
     ``python``, then check that a fresh process loads every one of them."""
     # the interpreter must import the unpacked package (not an installed raycore) and compile
     # for the portable target
-    check = ("import raycore, raycore._target as target; "
-             f"assert raycore.__file__.startswith({str(package_root)!r}), raycore.__file__; "
-             "assert raycore.info()['cpu'] == target.PORTABLE_CPU, "
-             "'this machine cannot compile for ' + target.PORTABLE_CPU")
+    check = _imports_raycore_from(repr(str(package_root))) + (
+        "import raycore._target as target; "
+        "assert raycore.info()['cpu'] == target.PORTABLE_CPU, "
+        "'this machine cannot compile for ' + target.PORTABLE_CPU")
     with tempfile.TemporaryDirectory() as elsewhere:  # not the repository: its raycore
         for command in (["-c", check], ["-m", "raycore.cli", "warmup", "--dtype", dtype],
                         ["-m", "raycore.cli", "warmup", "--dtype", dtype, "--expect-cached"]):
             _run([python, *command], elsewhere, PYTHONPATH=str(package_root))
+
+
+def _imports_raycore_from(folder):
+    """Python code that fails unless ``import raycore`` finds it in ``folder`` (an expression
+    in that code)."""
+    return f"import raycore; assert raycore.__file__.startswith({folder}), raycore.__file__; "
 
 
 def kernel_files(package_root):
@@ -93,7 +98,7 @@ def ship_kernels(wheel, pythons, dtype="both"):
         pristine = {path for path in unpacked.rglob("*") if path.is_file()}
         for python in pythons:
             compile_into(unpacked, python, dtype)
-        kernels = kernel_files(unpacked)
+        kernels = set(kernel_files(unpacked))
         for path in unpacked.rglob("*"):
             if path.is_file() and path not in pristine and path not in kernels:
                 path.unlink()
@@ -111,7 +116,7 @@ def build_wheel(dest):
     # setuptools builds in the repository's build/, and keeps there what the sources dropped
     shutil.rmtree(REPOSITORY / "build", ignore_errors=True)
     _run([sys.executable, "-m", "build", "--wheel", "--outdir", dest, REPOSITORY], REPOSITORY)
-    (wheel,) = glob.glob(os.path.join(dest, "raycore-*.whl"))
+    (wheel,) = Path(dest).glob("raycore-*.whl")
     return wheel
 
 
@@ -122,8 +127,7 @@ def install_into(folder, wheel):
     python = os.path.join(folder, "bin", "python")
     _run([python, "-m", "pip", "install", "--quiet", f"{wheel}[service]"], None)
     with tempfile.TemporaryDirectory() as elsewhere:  # the installed raycore, not another
-        _run([python, "-c", "import raycore, sys; "
-              "assert raycore.__file__.startswith(sys.prefix), raycore.__file__"], elsewhere)
+        _run([python, "-c", "import sys; " + _imports_raycore_from("sys.prefix")], elsewhere)
     return python
 
 

@@ -53,7 +53,6 @@ RECORD_FIELDS = (*FIELDS, "table")
 structref.define_proxy(SceneRecord, SceneRecordType, list(RECORD_FIELDS))
 
 
-
 @njit(cache=True)
 def new_record(*fields):
     """A :class:`SceneRecord` of ``fields`` (:data:`RECORD_FIELDS`' values, in order), made by

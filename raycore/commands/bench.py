@@ -6,7 +6,6 @@ editable install finds it beside ``raycore/``) with the ``bench`` extra installe
 """
 
 import importlib.util
-import os
 import sys
 from pathlib import Path
 
@@ -73,10 +72,7 @@ def _benchmark_module():
     if missing:
         raise CommandError(f"the benchmark needs the bench extra ({', '.join(missing)} "
                            "missing): pip install -e '.[service,bench]' (or make bench)")
-    # the benchmark runs part of itself in a subprocess (python -m benchmarks.run), which must
-    # find the checkout too, whatever the working directory
-    os.environ["PYTHONPATH"] = os.pathsep.join(
-        filter(None, [str(root), os.environ.get("PYTHONPATH")]))
+    # (its subprocesses find the checkout themselves: benchmarks.run.CHECKOUT)
     if str(root) not in sys.path:
         sys.path.insert(0, str(root))
     from benchmarks import run as bench

@@ -1,25 +1,10 @@
 """``raycore bench`` runs benchmarks/run.py with its own options; ``raycore serve --workers``."""
 
-import os
-
 import pytest
 
 from raycore import cli
 from raycore.commands import bench
 from tests.commands.conftest import refused
-
-
-@pytest.fixture(autouse=True)
-def _pythonpath_kept():
-    """``raycore bench`` puts the checkout on PYTHONPATH for its subprocesses, which in this
-    process would reach the tests that follow: a new virtual environment's pip then finds the
-    checkout's raycore metadata and installs no other (tests/test_wheel.py)."""
-    kept = os.environ.get("PYTHONPATH")
-    yield
-    if kept is None:
-        os.environ.pop("PYTHONPATH", None)
-    else:
-        os.environ["PYTHONPATH"] = kept
 
 
 def _options(parser):
