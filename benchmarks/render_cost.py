@@ -1,12 +1,13 @@
 """What a render costs beyond tracing its rays: ``python -m benchmarks.render_cost``.
 
 A 512x512 lambert render with shadows and 4 samples a pixel (the issue's bar), of the service's
-demo scene and of the shared stanford-bunny, shaded smooth.  Tracing is timed on the very rays
-the render traces: its camera rays' closest hits (no surface fields) and its shadow rays,
-captured from a render.  Everything else (ray generation, surface fields and shading normals,
-shadow-ray set-up, shading, the linear-light mean of the samples, sRGB encoding) is the render's
-own cost.  Render and tracing are timed in interleaved rounds, best of each; writes
-``benchmarks/results/render_cost.json``.
+demo scene and of the shared stanford-bunny, shaded smooth, from the camera as the service
+renders (``raycore.render.render_camera``).  Tracing is timed on the very rays the render
+traces, each set in one call: its camera rays' closest hits (no surface fields) and its shadow
+rays, captured from a render (which traces them a band of rows at a time).  Everything else
+(ray generation, surface fields and shading normals, shadow-ray set-up, shading, the
+linear-light mean of the samples, sRGB encoding) is the render's own cost.  Render and tracing
+are timed in interleaved rounds, best of each; writes ``benchmarks/results/render_cost.json``.
 """
 
 import argparse
@@ -19,8 +20,8 @@ import numpy as np
 from benchmarks.meshes import load
 from benchmarks.timing import interleaved_best_times
 from raycore import Scene
-from raycore.camera import frame_box, perspective_rays
-from raycore.render import render
+from raycore.camera import frame_box, perspective_camera
+from raycore.render import render_camera
 from service.builder import build_scene
 from service.demo import DEMO_CAMERA, demo_spec
 
@@ -29,10 +30,11 @@ SIZE, SAMPLES = 512, 4
 
 
 class _ShadowRays:
-    """``scene`` whose ``occluded`` keeps the arguments of its last call (the shadow rays)."""
+    """``scene`` whose ``occluded`` keeps the rays of its calls since the last ``start()``: a
+    render traces its shadow rays tile by tile (``raycore.render.TILE_RAYS``)."""
 
     def __init__(self, scene):
-        self.scene, self.shadow = scene, None
+        self.scene, self.calls = scene, []
 
     def __getattr__(self, name):
         return getattr(self.scene, name)
@@ -40,24 +42,29 @@ class _ShadowRays:
     def __len__(self):
         return len(self.scene)
 
-    def occluded(self, *args, **options):
-        self.shadow = (args, options)
-        return self.scene.occluded(*args, **options)
+    def occluded(self, origins, directions, **options):
+        self.calls.append((origins, directions, options))
+        return self.scene.occluded(origins, directions, **options)
+
+    def shadow_rays(self):
+        """The shadow rays of every call, as one batch: ``(origins, directions), options``."""
+        origins, directions, options = zip(*self.calls, strict=True)
+        assert all(option == options[0] for option in options)
+        return (np.concatenate(origins), np.concatenate(directions)), options[0]
 
 
 def measure(name, scene, colors, position, look_at, rounds):
     """Best render and tracing times of one scene, and their ratio."""
-    origins, directions = perspective_rays(position, look_at, (0.0, 1.0, 0.0), 45.0, SIZE, SIZE,
-                                           scene.dtype, samples=SAMPLES)
+    camera = perspective_camera(position, look_at, (0.0, 1.0, 0.0), 45.0, SIZE, SIZE)
+    origins, directions = camera.rays(scene.dtype, SAMPLES)
     captured = _ShadowRays(scene)
-    render(captured, origins, directions, SIZE, SIZE, samples=SAMPLES, colors=colors)
-    shadow_args, shadow_options = captured.shadow
+    render_camera(captured, camera, samples=SAMPLES, colors=colors)
+    shadow_args, shadow_options = captured.shadow_rays()
 
     def full_render():
-        # the camera rays are made inside the timed call, as the service makes them
-        rays = perspective_rays(position, look_at, (0.0, 1.0, 0.0), 45.0, SIZE, SIZE,
-                                scene.dtype, samples=SAMPLES)
-        return render(scene, *rays, SIZE, SIZE, samples=SAMPLES, colors=colors)
+        # from the camera, as the service renders: its rays are made in the timed call
+        camera = perspective_camera(position, look_at, (0.0, 1.0, 0.0), 45.0, SIZE, SIZE)
+        return render_camera(scene, camera, samples=SAMPLES, colors=colors)
 
     def tracing():
         scene.intersect(origins, directions)

@@ -6,6 +6,8 @@ perpendicular to the view direction, only not parallel to it).  Image x grows to
 the view, image y grows downwards.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import get_num_threads, get_thread_id, njit, prange
 
@@ -89,11 +91,13 @@ def _unit(x, y, z):
 
 
 @njit(cache=True, parallel=True, _nrt=False)
-def _sample_rays_kernel(center, right, up, x_scale, y_scale, width, height, samples, rows,
-                        columns, seed, unit, constant, scratch, points, constants):
-    """:func:`_plane_rays_kernel` for ``samples`` jittered rays per pixel, pixel by pixel: ray
-    ``(h * width + w) * samples + s`` goes through a random point of sample ``s``'s stratum
-    (see :func:`strata`); image coordinates in [-1, 1] are scaled by ``x_scale``, ``y_scale``.
+def _sample_rays_kernel(center, right, up, x_scale, y_scale, width, height, first_row,
+                        samples, rows, columns, seed, unit, constant, scratch, points, constants):
+    """:func:`_plane_rays_kernel` for ``samples`` jittered rays per pixel, pixel by pixel, of
+    image rows ``first_row`` on (as many as ``points`` holds): ray ``(h * width + w) * samples
+    + s`` of the image goes through a random point of sample ``s``'s stratum (see
+    :func:`strata`), whichever rows are made at once; image coordinates in [-1, 1] are scaled
+    by ``x_scale``, ``y_scale``.
 
     Divisions by the image size and the strata are multiplications by their reciprocals: the
     same rays where those are powers of two (512 pixels, 2x2 strata), else unit directions
@@ -112,7 +116,8 @@ def _sample_rays_kernel(center, right, up, x_scale, y_scale, width, height, samp
     right_x, right_y, right_z = right[0], right[1], right[2]
     up_x, up_y, up_z = up[0], up[1], up[2]
     constant_x, constant_y, constant_z = constant[0], constant[1], constant[2]
-    for h in prange(height):
+    band = first_row * width * samples  # the image's first ray in points
+    for h in prange(first_row, first_row + len(points) // (width * samples)):
         made = scratch[get_thread_id()]
         sample = 0
         for row in range(rows):
@@ -133,32 +138,68 @@ def _sample_rays_kernel(center, right, up, x_scale, y_scale, width, height, samp
                     made[1, w] = y
                     made[2, w] = z
                 for w in range(width):
-                    ray = (h * width + w) * samples + sample
+                    ray = (h * width + w) * samples + sample - band
                     points[ray, 0] = made[0, w]
                     points[ray, 1] = made[1, w]
                     points[ray, 2] = made[2, w]
                 sample += 1
-        for ray in range(h * width * samples, (h + 1) * width * samples):
+        for ray in range(h * width * samples - band, (h + 1) * width * samples - band):
             constants[ray, 0] = constant_x
             constants[ray, 1] = constant_y
             constants[ray, 2] = constant_z
 
 
-def _camera_rays(center, right, up, x_scale, y_scale, width, height, constant, dtype, samples,
-                 seed, unit):
-    """The image plane's rays, one per pixel centre or ``samples`` per pixel (see
-    :func:`_plane_rays` and :func:`_sample_rays_kernel`); ``x_scale`` and ``y_scale`` are the
-    plane's half extents."""
-    x, y = _pixel_grid(width, height)
-    rows, columns, _ = strata(samples)
-    if samples == 1:  # pixel centres, not jittered
-        return _plane_rays(center, right, up, x * x_scale, y * y_scale, constant, dtype, unit)
-    points = empty_aligned((width * height * samples, 3), dtype)
-    constants = empty_aligned(points.shape, dtype)
-    _sample_rays_kernel(center, right, up, float(x_scale), float(y_scale), width, height,
-                        samples, rows, columns, np.uint64(seed), unit, constant,
-                        np.empty((get_num_threads(), 3, width), dtype), points, constants)
-    return points, constants
+class Camera(NamedTuple):
+    """A camera's image plane, which makes the camera's rays a band of image rows at a time
+    (:meth:`rays`): a render traces and shades a large image in bands, each of whose rays are
+    made when it is reached (:func:`raycore.render.render_camera`).  Made by
+    :func:`perspective_camera` and :func:`orthographic_camera`.
+
+    The rays' varying ends (perspective: directions; orthographic: origins) are the points
+    ``center + x * x_scale * right + y * y_scale * up`` of image coordinates x, y in [-1, 1],
+    scaled to unit length when ``unit``; their other ends all equal ``constant``.
+    """
+
+    center: np.ndarray
+    right: np.ndarray
+    up: np.ndarray
+    x_scale: float
+    y_scale: float
+    width: int
+    height: int
+    constant: np.ndarray
+    #: Perspective: the points are directions (unit length), ``constant`` the origin.
+    unit: bool
+
+    def rays(self, dtype="float64", samples=1, seed=0, rows=None):
+        """The camera's rays, one per pixel centre or ``samples`` per pixel (see
+        :func:`_plane_rays` and :func:`_sample_rays_kernel`), of every image row or of rows
+        ``rows[0]`` to ``rows[1] - 1``: the same rays either way.
+
+        Returns
+        -------
+        origins, directions : ndarray, shape (rows * width * samples, 3)
+            Pixel by pixel in scanline order, a pixel's samples together.
+        """
+        first, last = (0, self.height) if rows is None else rows
+        if not 0 <= first < last <= self.height:
+            raise ValueError(f"rows must lie in [0, {self.height}], got {rows!r}")
+        dtype = resolve_dtype(dtype)
+        x, y = _pixel_grid(self.width, self.height)
+        strata_rows, columns, _ = strata(samples)
+        if samples == 1:  # pixel centres, not jittered
+            points, constants = _plane_rays(self.center, self.right, self.up, x * self.x_scale,
+                                            y[first:last] * self.y_scale, self.constant, dtype,
+                                            self.unit)
+        else:
+            points = empty_aligned(((last - first) * self.width * samples, 3), dtype)
+            constants = empty_aligned(points.shape, dtype)
+            _sample_rays_kernel(self.center, self.right, self.up, float(self.x_scale),
+                                float(self.y_scale), self.width, self.height, first, samples,
+                                strata_rows, columns, np.uint64(seed), self.unit, self.constant,
+                                np.empty((get_num_threads(), 3, self.width), dtype), points,
+                                constants)
+        return (constants, points) if self.unit else (points, constants)
 
 
 def _plane_rays(center, right, up, across, rise, constant, dtype, unit=False):
@@ -224,14 +265,19 @@ def perspective_rays(position, look_at, up, fov, width, height, dtype="float64",
     ValueError
         Naming the argument that is out of range or degenerate.
     """
+    return perspective_camera(position, look_at, up, fov, width, height).rays(dtype, samples,
+                                                                              seed)
+
+
+def perspective_camera(position, look_at, up, fov, width, height):
+    """The :class:`Camera` of :func:`perspective_rays` (see there for the arguments)."""
     _check_fov(fov)
+    _pixel_grid(width, height)  # checks them
     position, right, true_up, forward = _frame(position, look_at, up)
     # the image plane at distance 1
     half_height = np.tan(np.radians(fov) / 2)
-    directions, origins = _camera_rays(forward, right, true_up, half_height * width / height,
-                                       half_height, width, height, position,
-                                       resolve_dtype(dtype), samples, seed, unit=True)
-    return origins, directions
+    return Camera(forward, right, true_up, half_height * width / height, half_height, width,
+                  height, position, unit=True)
 
 
 def orthographic_rays(position, look_at, up, view_height, width, height, dtype="float64",
@@ -260,12 +306,18 @@ def orthographic_rays(position, look_at, up, view_height, width, height, dtype="
     ValueError
         Naming the argument that is out of range or degenerate.
     """
+    return orthographic_camera(position, look_at, up, view_height, width, height).rays(
+        dtype, samples, seed)
+
+
+def orthographic_camera(position, look_at, up, view_height, width, height):
+    """The :class:`Camera` of :func:`orthographic_rays` (see there for the arguments)."""
     if not (np.isfinite(view_height) and view_height > 0):
         raise ValueError(f"view_height must be positive and finite, got {view_height!r}")
+    _pixel_grid(width, height)  # checks them
     position, right, true_up, forward = _frame(position, look_at, up)
-    return _camera_rays(position, right, true_up, view_height / 2 * width / height,
-                        view_height / 2, width, height, forward, resolve_dtype(dtype), samples,
-                        seed, unit=False)
+    return Camera(position, right, true_up, view_height / 2 * width / height, view_height / 2,
+                  width, height, forward, unit=False)
 
 
 #: Where the framing camera looks from, seen from the scene's centre: in front (+z), to the right

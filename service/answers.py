@@ -7,10 +7,10 @@ exactly as the service does.  The library's ``ValueError``s become
 
 import numpy as np
 
-from raycore.render import ARRAY_SHADINGS, render, render_arrays
+from raycore.render import ARRAY_SHADINGS, render_arrays, render_camera
 from service import codecs
 from service.errors import ClientError, NotAcceptable
-from service.sensors import camera_rays
+from service.sensors import camera_of, camera_rays
 
 
 def run_query(scene, rays, options):
@@ -110,12 +110,10 @@ def render_image(scene, colors, spec):
     """
     camera = spec.camera
     try:
-        rays = camera_rays(camera, scene.dtype, spec.samples)
-        return render(scene, rays.origins, rays.directions, camera.width, camera.height,
-                      spec.shading, samples=spec.samples, smooth=spec.smooth,
-                      light_direction=spec.light_direction, colors=colors,
-                      background=np.asarray(spec.background), ambient=spec.ambient,
-                      triangle_test=spec.triangle_test)
+        return render_camera(scene, camera_of(camera), spec.shading, samples=spec.samples,
+                             smooth=spec.smooth, light_direction=spec.light_direction,
+                             colors=colors, background=np.asarray(spec.background),
+                             ambient=spec.ambient, triangle_test=spec.triangle_test)
     except ValueError as error:
         raise ClientError(str(error)) from error
 

@@ -4,6 +4,7 @@
 import numpy as np
 
 from raycore import sensors
+from raycore.camera import orthographic_camera, perspective_camera
 from service.errors import ClientError, LimitExceeded
 
 
@@ -61,6 +62,21 @@ def camera_rays(camera, dtype, samples=1, seed=0):
     if camera.type == "perspective":
         return sensors.perspective(*view, fov=camera.fov, **size)
     return sensors.orthographic(*view, camera.view_height, **size)
+
+
+def camera_of(camera):
+    """The library's :class:`raycore.camera.Camera` of a render request's camera, which makes
+    the same rays as :func:`camera_rays`.
+
+    Raises
+    ------
+    ValueError
+        The library's, for a degenerate camera.
+    """
+    view = (camera.position, camera.look_at, camera.up)
+    if camera.type == "perspective":
+        return perspective_camera(*view, camera.fov, camera.width, camera.height)
+    return orthographic_camera(*view, camera.view_height, camera.width, camera.height)
 
 
 def _lidar(spec, dtype, max_rays):

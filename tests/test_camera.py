@@ -3,7 +3,12 @@
 import numpy as np
 import pytest
 
-from raycore.camera import orthographic_rays, perspective_rays
+from raycore.camera import (
+    orthographic_camera,
+    orthographic_rays,
+    perspective_camera,
+    perspective_rays,
+)
 
 VIEW = {"position": [0.0, 0.0, -5.0], "look_at": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0]}
 
@@ -76,6 +81,33 @@ def test_float32_rays_are_the_float64_rays_rounded(make):
     exact_origins, exact_directions = make("float64")
     np.testing.assert_allclose(origins, exact_origins, rtol=2e-7, atol=1e-7)
     np.testing.assert_allclose(directions, exact_directions, rtol=2e-7, atol=2e-7)
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+@pytest.mark.parametrize("samples", [1, 4, 5])
+@pytest.mark.parametrize("camera, rays", [
+    (lambda: perspective_camera(**VIEW, fov=50.0, width=7, height=5),
+     lambda **kw: perspective_rays(**VIEW, fov=50.0, width=7, height=5, **kw)),
+    (lambda: orthographic_camera(**VIEW, view_height=3.0, width=7, height=5),
+     lambda **kw: orthographic_rays(**VIEW, view_height=3.0, width=7, height=5, **kw)),
+])
+def test_a_cameras_bands_of_rows_are_its_rays(camera, rays, samples, dtype):
+    # a render makes its rays a band of rows at a time: each ray is the one the whole image has
+    camera = camera()
+    whole = rays(dtype=dtype, samples=samples, seed=3)
+    for got, want in zip(camera.rays(dtype, samples, 3), whole, strict=True):
+        np.testing.assert_array_equal(got, want)
+    bands = [camera.rays(dtype, samples, 3, rows) for rows in ((0, 2), (2, 3), (3, 5))]
+    for k in range(2):
+        banded = np.concatenate([band[k] for band in bands])
+        assert banded.dtype == whole[k].dtype
+        np.testing.assert_array_equal(banded, whole[k])
+
+
+@pytest.mark.parametrize("rows", [(0, 0), (-1, 2), (3, 2), (0, 6)])
+def test_bad_band_of_rows(rows):
+    with pytest.raises(ValueError, match="rows"):
+        perspective_camera(**VIEW, fov=50.0, width=4, height=5).rays(rows=rows)
 
 
 def test_bad_dtype():

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from raycore import Scene
-from raycore.camera import orthographic_rays, perspective_rays
-from raycore.render import DEFAULT_COLOR, render, render_arrays
+from raycore import render as render_module
+from raycore.camera import orthographic_camera, orthographic_rays, perspective_rays
+from raycore.render import DEFAULT_COLOR, render, render_arrays, render_camera
 
 SIZE = 96
 
@@ -199,6 +200,26 @@ def test_camera_samples_are_stratified_and_seeded():
     x, y = (1 - origins[:, 0]) / 2, (1 - origins[:, 1]) / 2
     cells = np.floor(x * 3).astype(int) + 3 * np.floor(y * 3).astype(int)
     np.testing.assert_array_equal(np.sort(cells), np.arange(9))
+
+
+@pytest.mark.parametrize("shading", ["lambert", "depth"])
+def test_a_camera_renders_as_its_rays_do(monkeypatch, shading):
+    # a lambert render goes a band of rows at a time (TILE_RAYS): bands of 2 rows (the last of
+    # 1) give the image that the camera's rays give in one band, and the camera's render, which
+    # makes each band's rays as it reaches it, gives the same
+    vertices, faces = _icosphere()
+    scene = Scene("float32")
+    scene.add_mesh(vertices, faces)
+    scene.add_box([-3.0, -1.0, -1.0], [-1.5, 1.0, 1.0])
+    camera = orthographic_camera([0.0, 1.0, -5.0], [-0.5, 0.0, 0.0], [0.0, 1.0, 0.0], 5.0, 12, 9)
+    rays = camera.rays(scene.dtype, samples=4, seed=2)
+    options = {"samples": 4, "colors": [[0.9, 0.2, 0.2], [0.2, 0.9, 0.2]]}
+    whole = render(scene, *rays, 12, 9, shading, **options)
+    assert len(np.unique(whole.reshape(-1, 3), axis=0)) > 3  # something to compare
+    monkeypatch.setattr(render_module, "TILE_RAYS", 2 * 12 * 4)
+    np.testing.assert_array_equal(render(scene, *rays, 12, 9, shading, **options), whole)
+    np.testing.assert_array_equal(render_camera(scene, camera, shading, seed=2, **options),
+                                  whole)
 
 
 def _icosphere():
