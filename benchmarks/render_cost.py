@@ -30,8 +30,8 @@ SIZE, SAMPLES = 512, 4
 
 
 class _ShadowRays:
-    """``scene`` whose ``occluded`` keeps the rays of its calls since the last ``start()``: a
-    render traces its shadow rays tile by tile (``raycore.render.TILE_RAYS``)."""
+    """``scene`` whose ``occluded`` keeps the rays of every call: a render traces its shadow
+    rays a band at a time (``raycore.render.TILE_RAYS``)."""
 
     def __init__(self, scene):
         self.scene, self.calls = scene, []

@@ -185,9 +185,9 @@ class Camera(NamedTuple):
         if not 0 <= first < last <= self.height:
             raise ValueError(f"rows must lie in [0, {self.height}], got {rows!r}")
         dtype = resolve_dtype(dtype)
-        x, y = _pixel_grid(self.width, self.height)
         strata_rows, columns, _ = strata(samples)
         if samples == 1:  # pixel centres, not jittered
+            x, y = _pixel_grid(self.width, self.height)
             points, constants = _plane_rays(self.center, self.right, self.up, x * self.x_scale,
                                             y[first:last] * self.y_scale, self.constant, dtype,
                                             self.unit)

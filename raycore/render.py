@@ -11,6 +11,7 @@ encoded to sRGB once.  Meshes are shaded smooth, from their vertex normals
 (:mod:`raycore.shading`), unless asked not to be.
 """
 
+import inspect
 import math
 import struct
 
@@ -119,9 +120,10 @@ def render_camera(scene, camera, shading="lambert", *, samples=1, seed=0, **opti
                    camera.width, camera.height, shading, weights, **options)
 
 
-#: :func:`render`'s options, for :func:`render_camera`.
-_RENDER_DEFAULTS = {"smooth": True, "light_direction": DEFAULT_LIGHT, "colors": None,
-                    "background": (0, 0, 0), "ambient": 0.15, "triangle_test": "watertight"}
+#: :func:`render`'s options and their defaults, for :func:`render_camera`.
+_RENDER_DEFAULTS = {name: parameter.default
+                    for name, parameter in inspect.signature(render).parameters.items()
+                    if parameter.kind is parameter.KEYWORD_ONLY and name != "samples"}
 
 
 def _render(scene, band_rays, width, height, shading, weights, smooth, light_direction,

@@ -7,8 +7,9 @@ Each generator returns :class:`SensorRays`, whose four members are the arguments
     hits = scene.intersect(*rays, fields=("point",))
     hits.t          # the range of each return (directions are unit length), inf for none
 
-The HTTP service makes its ``"rays"`` with these same functions, so that a sensor described in
-a request gives exactly the rays it gives in process.  Cameras are those of
+The HTTP service makes its ``"rays"`` with these same functions (its cameras with the
+:class:`raycore.camera.Camera` that :func:`perspective` and :func:`orthographic` use), so that a
+sensor described in a request gives exactly the rays it gives in process.  Cameras are those of
 :mod:`raycore.camera` (one implementation for renders and ray batches).
 """
 

@@ -56,17 +56,13 @@ def camera_rays(camera, dtype, samples=1, seed=0):
     ValueError
         The library's, for a degenerate camera.
     """
-    view = (camera.position, camera.look_at)
-    size = {"up": camera.up, "width": camera.width, "height": camera.height, "dtype": dtype,
-            "samples": samples, "seed": seed}
-    if camera.type == "perspective":
-        return sensors.perspective(*view, fov=camera.fov, **size)
-    return sensors.orthographic(*view, camera.view_height, **size)
+    return sensors.SensorRays(*camera_of(camera).rays(dtype, samples, seed), 0.0, np.inf)
 
 
 def camera_of(camera):
-    """The library's :class:`raycore.camera.Camera` of a render request's camera, which makes
-    the same rays as :func:`camera_rays`.
+    """The library's :class:`raycore.camera.Camera` of a request's camera (a render's, or a
+    ``"rays"`` camera): the one that :func:`raycore.sensors.perspective` and
+    :func:`raycore.sensors.orthographic` make their rays with.
 
     Raises
     ------
