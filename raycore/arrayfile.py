@@ -254,7 +254,7 @@ def _read_at(file, view, offset):
 
 
 def _parse(raw, mapping=map):
-    """``(meta, arrays)`` of a file's bytes ``raw``, checked; a large array's checksums in the
+    """``(meta, arrays)`` of a file's bytes ``raw``, checked; a large file's checksums in the
     calls that ``mapping`` makes (:func:`_crcs`)."""
     if len(raw) < _PREFIX.size:
         raise ValueError(f"the scene file is truncated: {len(raw)} bytes")
