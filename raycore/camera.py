@@ -176,10 +176,13 @@ class Camera(NamedTuple):
     #: Perspective: the points are directions (unit length), ``constant`` the origin.
     unit: bool
 
-    def rays(self, dtype="float64", samples=1, seed=0, rows=None):
+    def rays(self, dtype="float64", samples=1, seed=0, rows=None, out=None):
         """The camera's rays, one per pixel centre or ``samples`` per pixel (see
-        :func:`_plane_rays` and :func:`_sample_rays_kernel`), of every image row or of rows
+        :func:`_plane_rays_kernel` and :func:`_sample_rays_kernel`), of every image row or of rows
         ``rows[0]`` to ``rows[1] - 1``: the same rays either way.
+
+        ``out``, a pair of C-contiguous arrays of ``dtype`` and the rays' shape, receives them
+        (a render's bands reuse one pair: :func:`raycore.render.render_camera`).
 
         Returns
         -------
@@ -191,34 +194,36 @@ class Camera(NamedTuple):
             raise ValueError(f"rows must lie in [0, {self.height}], got {rows!r}")
         dtype = resolve_dtype(dtype)
         strata_rows, columns, _ = strata(samples)
+        shape = ((last - first) * self.width * samples, 3)
+        if out is None:
+            out = empty_aligned(shape, dtype), empty_aligned(shape, dtype)
+        elif len(out) != 2 or any(
+                not isinstance(a, np.ndarray) or a.shape != shape or a.dtype != dtype
+                or not a.flags.c_contiguous or not a.flags.writeable for a in out):
+            raise ValueError(f"out must be two writable C-contiguous {np.dtype(dtype).name} "
+                             f"arrays of shape {shape}")
+        # the varying ends are the directions of a perspective camera, the origins otherwise
+        constants, points = out if self.unit else out[::-1]
         if samples == 1:  # pixel centres, not jittered
             x, y = _pixel_grid(self.width, self.height)
-            points, constants = _plane_rays(self.center, self.right, self.up, x * self.x_scale,
-                                            y[first:last] * self.y_scale, self.constant, dtype,
-                                            self.unit)
+            _plane_rays_kernel(self.center, self.right, self.up, x * self.x_scale,
+                               y[first:last] * self.y_scale, self.unit, self.constant, points,
+                               constants)
         else:
-            points = empty_aligned(((last - first) * self.width * samples, 3), dtype)
-            constants = empty_aligned(points.shape, dtype)
             _sample_rays_kernel(self.center, self.right, self.up, float(self.x_scale),
                                 float(self.y_scale), self.width, self.height, first, samples,
                                 strata_rows, columns, np.uint64(seed), self.unit, self.constant,
                                 np.empty((get_num_threads(), 3, self.width), dtype), points,
                                 constants)
-        return (constants, points) if self.unit else (points, constants)
-
-
-def _plane_rays(center, right, up, across, rise, constant, dtype, unit=False):
-    """Rays of an image plane, in scanline order, both (H*W, 3) of ``dtype``: the points
-    ``center + across[w] * right + rise[h] * up`` (computed in float64, rounded once, scaled to
-    unit length when ``unit``), and rows that all equal ``constant``, written in the same pass."""
-    points = empty_aligned((len(rise) * len(across), 3), dtype)
-    constants = empty_aligned(points.shape, dtype)
-    _plane_rays_kernel(center, right, up, across, rise, unit, constant, points, constants)
-    return points, constants
+        return out
 
 
 @njit(cache=True, parallel=True)
 def _plane_rays_kernel(center, right, up, across, rise, unit, constant, points, constants):
+    """Rays of an image plane, in scanline order, into ``points`` and ``constants`` ((H*W, 3)):
+    the points ``center + across[w] * right + rise[h] * up`` (computed in float64, rounded
+    once, scaled to unit length when ``unit``), and rows that all equal ``constant``, written in
+    the same pass."""
     width = len(across)
     for h in prange(len(rise)):
         for w in range(width):

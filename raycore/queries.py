@@ -309,8 +309,10 @@ def _trace_grouped(order, rays, arguments, threads):
     return order[first_bad] if first_bad < len(order) else len(order)
 
 
-def closest_hits(scene, rays, test, sphere_method, barycentrics):
-    """Closest hit of each ray.
+def closest_hits(scene, rays, test, sphere_method, barycentrics, out=None):
+    """Closest hit of each ray; into ``out`` when given: ``(t, obj, prim, u, v, slot)``,
+    arrays of the returned ones' dtypes and shapes (the last three with ``barycentrics``
+    only), which a render's bands reuse.
 
     Returns
     -------
@@ -326,11 +328,15 @@ def closest_hits(scene, rays, test, sphere_method, barycentrics):
     """
     n = len(rays[0])
     dtype = rays[0].dtype
-    t = np.empty(n, dtype)
-    obj = np.empty(n, _INT64)
-    prim = np.empty(n, _INT64)
-    surface = (np.empty(n, dtype), np.empty(n, dtype), np.empty(n, _INT64)) \
-        if barycentrics else None
+    if out is None:
+        t = np.empty(n, dtype)
+        obj = np.empty(n, _INT64)
+        prim = np.empty(n, _INT64)
+        surface = (np.empty(n, dtype), np.empty(n, dtype), np.empty(n, _INT64)) \
+            if barycentrics else None
+    else:
+        t, obj, prim, *surface = out
+        surface = tuple(surface) if barycentrics else None
     if n < SERIAL_BELOW and not barycentrics:
         first_bad = _compiled(_hits_here, scene)(scene, CLOSEST, test, sphere_method, *rays, t,
                                                  obj, prim, _NO_FLAGS)

@@ -85,8 +85,8 @@ def render(scene, origins, directions, width, height, shading="lambert", *, samp
         raise ValueError(f"origins must have shape ({rays}, 3) for a {width}x{height} image of "
                          f"{samples} samples a pixel, got {origins.shape}")
     row = width * samples
-    return _render(scene, lambda first, last: (origins[first * row:last * row],
-                                               directions[first * row:last * row]),
+    return _render(scene, lambda first, last, memory=None: (origins[first * row:last * row],
+                                                            directions[first * row:last * row]),
                    width, height, shading, weights, smooth, light_direction, colors, background,
                    ambient, triangle_test)
 
@@ -115,9 +115,14 @@ def render_camera(scene, camera, shading="lambert", *, samples=1, seed=0, **opti
     """
     _, _, weights = strata(samples)
     options = {**_RENDER_DEFAULTS, **options}
-    return _render(scene, lambda first, last: camera.rays(scene.dtype, samples, seed,
-                                                          (first, last)),
-                   camera.width, camera.height, shading, weights, **options)
+
+    def band_rays(first, last, memory=None):
+        shape = ((last - first) * camera.width * samples, 3)
+        out = None if memory is None else (memory.take("origins", shape, scene.dtype),
+                                           memory.take("directions", shape, scene.dtype))
+        return camera.rays(scene.dtype, samples, seed, (first, last), out)
+
+    return _render(scene, band_rays, camera.width, camera.height, shading, weights, **options)
 
 
 #: :func:`render`'s options and their defaults, for :func:`render_camera`.
@@ -128,9 +133,10 @@ _RENDER_DEFAULTS = {name: parameter.default
 
 def _render(scene, band_rays, width, height, shading, weights, smooth, light_direction,
             colors, background, ambient, triangle_test):
-    """:func:`render` of the rays that ``band_rays(first_row, last_row)`` gives, as
+    """:func:`render` of the rays that ``band_rays(first_row, last_row, memory)`` gives, as
     ``(origins, directions)`` in the scene's precision, for image rows ``first_row`` to
-    ``last_row - 1``; a pixel's ``len(weights)`` samples together."""
+    ``last_row - 1``; a pixel's ``len(weights)`` samples together.  ``memory``
+    (:class:`_BandMemory`, or None for the whole image at once) holds arrays it may reuse."""
     if shading not in SHADINGS:
         raise ValueError(f"shading must be one of {SHADINGS}, got {shading!r}")
     if not 0 <= ambient <= 1:
@@ -141,10 +147,12 @@ def _render(scene, band_rays, width, height, shading, weights, smooth, light_dir
     if shading == "lambert":
         light, colors = _unit_light(light_direction), _color_table(colors, len(scene))
         rows = max(1, TILE_RAYS // (width * samples))
+        memory = _BandMemory()
         for first in range(0, height, rows):
             last = min(height, first + rows)
-            _lambert(scene, *band_rays(first, last), smooth, light, colors, float(ambient),
-                     background, weights, triangle_test, image[first:last].reshape(-1, 3))
+            _lambert(scene, *band_rays(first, last, memory), smooth, light, colors,
+                     float(ambient), background, weights, triangle_test,
+                     image[first:last].reshape(-1, 3), memory)
         return image
     origins, directions = band_rays(0, height)
     fields = ()
@@ -344,6 +352,29 @@ def _normal_colors(directions, normals, shading, linear):
 #: 87.9 / 77.1; the same images.
 TILE_RAYS = 65536
 
+class _BandMemory:
+    """The arrays that each band of a render writes, made for its first band and reused by the
+    others (a smaller last band takes their first rows).
+
+    Made afresh for each band, they cost their pages afresh: glibc maps an array of 128 KiB or
+    more from the kernel and gives it back when it is freed, so that each band faulted its 7 MB
+    in again, 4 KiB at a time: 24,900 faults a 512x512, 4-sample demo render, which took 88 ms
+    in a fresh process (2 cores) against 50 once glibc had raised that threshold (it does when
+    a larger array is freed, as after a query of a million rays).
+    """
+
+    def __init__(self):
+        self._arrays = {}
+
+    def take(self, name, shape, dtype):
+        """Array ``name`` with ``shape`` (its rows first) and ``dtype``: the first rows of the
+        one made before, or a new one if that is too short."""
+        array = self._arrays.get(name)
+        if array is None or len(array) < shape[0]:
+            array = self._arrays[name] = empty_aligned(shape, dtype)
+        return array[:shape[0]]
+
+
 #: Pixels per work item of the lambert passes.  A work item numbers its lit hits' shadow rays
 #: in order from where its own start (:func:`_shadow_rays`), so that the shading pass, over
 #: the same items, finds each hit's answer without an index per ray.
@@ -351,18 +382,23 @@ CHUNK_PIXELS = 256
 
 
 def _lambert(scene, origins, directions, smooth, light, colors, ambient, background, weights,
-             triangle_test, image):
+             triangle_test, image, memory):
     """Fill ``image`` ((P, 3) uint8) with the lambert shading of the camera rays (P * S): their
-    closest hits, one shadow ray per lit hit, then the pixels (:func:`_lambert_image`)."""
-    hits = scene._surface_hits(origins, directions, triangle_test, smooth)
+    closest hits, one shadow ray per lit hit, then the pixels (:func:`_lambert_image`); the
+    arrays in between come from ``memory`` (:class:`_BandMemory`)."""
+    n, dtype = len(origins), origins.dtype
+    hit_arrays = [memory.take(name, (n,), kind) for name, kind in (
+        ("t", dtype), ("geom_id", np.int64), ("prim_id", np.int64), ("u", dtype), ("v", dtype),
+        ("slot", np.int64))]
+    hits = scene._surface_hits(origins, directions, triangle_test, smooth, hit_arrays)
     cosine, starts, shadow_origins, shadow_directions = _shadow_rays(
-        hits, smooth, light, CHUNK_PIXELS * len(weights))
+        hits, smooth, light, CHUNK_PIXELS * len(weights), memory)
     shadowed = scene.occluded(shadow_origins, shadow_directions, triangle_test=triangle_test)
     _lambert_image(colors, hits.geom_id, cosine, shadowed, starts, CHUNK_PIXELS, ambient,
                    background, weights, _LEVELS, _GUESSES, image)
 
 
-def _shadow_rays(hits, smooth, light, chunk):
+def _shadow_rays(hits, smooth, light, chunk, memory):
     """The cosines of closest hits' shading normals to the light, and a shadow ray per hit that
     the light reaches the front of (its cosine is positive: a lit hit).
 
@@ -378,6 +414,8 @@ def _shadow_rays(hits, smooth, light, chunk):
     chunk : int
         Rays per work item: the lit hits of rays ``[c * chunk, (c + 1) * chunk)`` have shadow
         rays ``starts[c]`` on, in their order.
+    memory : _BandMemory
+        Where the arrays come from.
 
     Returns
     -------
@@ -389,17 +427,18 @@ def _shadow_rays(hits, smooth, light, chunk):
         ``tmax = inf``.
     """
     n, dtype = len(hits.t), hits.t.dtype
-    cosine = empty_aligned((n,), np.float64)
+    cosine = memory.take("cosine", (n,), np.float64)
     # each work item's shadow ray origins, from the item's first ray's row on
-    lit_origins = empty_aligned((n, 3), dtype)
+    lit_origins = memory.take("lit_origins", (n, 3), dtype)
     counts = np.empty(-(-n // chunk), np.int64)
     error_eps = _POINT_ERROR_EPS * float(np.finfo(dtype).eps)
     _light_pass(*hits, smooth, light, error_eps, *offset_constants(dtype.type), chunk, cosine,
                 lit_origins, counts)
     starts = np.cumsum(counts) - counts
     lit = int(counts.sum())
-    origins = empty_aligned((lit, 3), dtype)
-    directions = empty_aligned((lit, 3), dtype)
+    # room for every ray's, so that the first band's arrays serve the others
+    origins = memory.take("shadow_origins", (n, 3), dtype)[:lit]
+    directions = memory.take("shadow_directions", (n, 3), dtype)[:lit]
     _gather_shadow_rays(lit_origins, counts, starts, chunk, light, origins, directions)
     return cosine, starts, origins, directions
 

@@ -328,15 +328,16 @@ class Scene:
                     **{name: surface[name] for name in fields})
 
     def _closest_hits(self, origins, directions, tmin, tmax, triangle_test, sphere_method,
-                      barycentrics):
+                      barycentrics, out=None):
         """``(rays, t, obj, prim, (u, v, slot))``: the rays as the kernels take them and
         :func:`raycore.queries.closest_hits` of them (the last item empty unless
-        ``barycentrics``); a ValueError naming what is wrong with a ray it refused."""
+        ``barycentrics``), into ``out`` as there; a ValueError naming what is wrong with a ray
+        it refused."""
         test = triangle_test_code(triangle_test)
         method = analytic.sphere_method_code(sphere_method)
         rays = ray_arrays(origins, directions, tmin, tmax, self._kernel_dtype)
         first_bad, t, obj, prim, surface = queries.closest_hits(
-            self._scene(), rays, test, method, barycentrics=barycentrics)
+            self._scene(), rays, test, method, barycentrics=barycentrics, out=out)
         if first_bad < len(rays[0]):  # the compiled pass refused a ray: say what is wrong
             refuse(origins, directions, tmin, tmax, self.dtype)
         return rays, t, obj, prim, surface
@@ -354,10 +355,12 @@ class Scene:
                 self.dtype))
         return self._normal_tables[1]
 
-    def _surface_hits(self, origins, directions, triangle_test, smooth):
+    def _surface_hits(self, origins, directions, triangle_test, smooth, out=None):
         """Closest hits, and what a compiled pass over them computes their normals from
         (:func:`raycore.queries.hit_surface`, :func:`raycore.shading.interpolated_normal`):
-        the render's, which would otherwise write them out and read them back.
+        the render's, which would otherwise write them out and read them back.  ``out``: the
+        arrays ``(t, geom_id, prim_id, u, v, slot)`` to write them to, as
+        :func:`raycore.queries.closest_hits` takes them.
 
         Returns
         -------
@@ -365,7 +368,7 @@ class Scene:
             ``tables`` empty unless ``smooth``.
         """
         rays, t, obj, prim, (u, v, slot) = self._closest_hits(
-            origins, directions, 0.0, np.inf, triangle_test, "precise", True)
+            origins, directions, 0.0, np.inf, triangle_test, "precise", True, out)
         tables = self._vertex_normal_tables() if smooth else NormalTables(
             [], [], [], [], [], self.dtype)
         return SurfaceHits(self._record, tables.arrays, rays[0], rays[1], t, obj, prim, u, v,

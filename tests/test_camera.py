@@ -102,6 +102,33 @@ def test_a_cameras_bands_of_rows_are_its_rays(camera, rays, samples, dtype):
         banded = np.concatenate([band[k] for band in bands])
         assert banded.dtype == whole[k].dtype
         np.testing.assert_array_equal(banded, whole[k])
+    # written into one pair of arrays that every band reuses, as a render does
+    row = camera.width * samples
+    memory = [np.full((2 * row, 3), np.nan, dtype) for _ in range(2)]
+    for first, last in ((2, 3), (0, 2), (3, 5)):
+        out = [array[:(last - first) * row] for array in memory]
+        assert camera.rays(dtype, samples, 3, (first, last), out) is out
+        for k in range(2):
+            np.testing.assert_array_equal(out[k], whole[k][first * row:last * row])
+
+
+def _read_only(array):
+    array.flags.writeable = False
+    return array
+
+
+@pytest.mark.parametrize("out", [
+    [np.empty((7, 3)), np.empty((7, 3))],  # too short
+    [np.empty((35, 3), np.float32), np.empty((35, 3))],  # another dtype
+    [np.empty((35, 3))],  # one array
+    [np.empty((35, 3)), np.empty((35, 6))[:, :3]],  # not contiguous
+    [np.empty((35, 3)), _read_only(np.empty((35, 3)))],
+    [np.empty((35, 3)), [[0.0] * 3] * 35],  # not an array
+])
+def test_bad_output_arrays(out):
+    # the kernels write without bounds checks: a wrong array is refused, not written past
+    with pytest.raises(ValueError, match="out must be"):
+        perspective_camera(**VIEW, fov=50.0, width=7, height=5).rays("float64", out=out)
 
 
 @pytest.mark.parametrize("rows", [(0, 0), (-1, 2), (3, 2), (0, 6)])
