@@ -43,7 +43,8 @@ class _ShadowRays:
         return len(self.scene)
 
     def occluded(self, origins, directions, **options):
-        self.calls.append((origins, directions, options))
+        # copies: the render writes each band's shadow rays over the last band's
+        self.calls.append((origins.copy(), directions.copy(), options))
         return self.scene.occluded(origins, directions, **options)
 
     def shadow_rays(self):
