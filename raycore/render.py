@@ -345,12 +345,15 @@ def _normal_colors(directions, normals, shading, linear):
 
 #: Camera rays a lambert render traces and shades at a time (whole image rows, at least one).
 #: Each band's passes (closest hits, shadow rays, pixels) write and read some 100 bytes a ray,
-#: which stay in the cache for the next pass when the band is small, and the allocator hands
-#: the same memory to the next band rather than the kernel faulting in fresh pages for the
+#: which stay in the cache for the next pass when the band is small, and every band writes
+#: into the first band's arrays (:class:`_BandMemory`) rather than pages faulted in for the
 #: whole image.  A 512x512, 4-sample render, rays given, 2 cores: one band 92.7 ms (demo) and
 #: 75.8 (stanford-bunny), bands of 262,144 rays 85.9 / 73.2, of 65,536 80.8 / 70.5, of 16,384
-#: 87.9 / 77.1; the same images.
+#: 87.9 / 77.1; the same images.  With the arrays reused, from the camera (Zen 4): bands of
+#: 8,192 to 262,144 rays 49.0-54.6 ms (demo) and 47.1-52.8 (stanford-bunny), 65,536 among the
+#: fastest of both.
 TILE_RAYS = 65536
+
 
 class _BandMemory:
     """The arrays that each band of a render writes, made for its first band and reused by the
