@@ -28,7 +28,8 @@ def info():
             ``numba.set_num_threads`` in this thread).
         ``cpu`` : str
             The CPU the kernels are compiled for: ``NUMBA_CPU_NAME``, which raycore sets to
-            the portable x86-64-v3 where it can (:mod:`raycore._target`), else this machine's.
+            the best level the machine runs, x86-64-v4 or x86-64-v3, where it can
+            (:mod:`raycore._target`), else this machine's.
         ``host_cpu`` : str
             This machine's CPU, as LLVM names it.
         ``simd`` : list of str

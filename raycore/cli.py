@@ -10,6 +10,7 @@ and exit status 1 (2 for the command line's own syntax), never a traceback.
 import argparse
 import json
 import os
+import subprocess
 import sys
 
 from raycore.commands import CommandError, bench, cast, positive_int, render, user_error
@@ -64,14 +65,34 @@ def _info(args):
 
 def _warmup(args):
     from raycore._compile_notice import NOTICE
+    from raycore._target import runnable_levels
     from raycore._warmup import DTYPES, warm_up
 
+    if args.every_level and runnable_levels():
+        _warm_up_every_level(args, runnable_levels())
+        return
     dtypes = DTYPES if args.dtype == "both" else (args.dtype,)
     seconds = warm_up(dtypes)
     print(f"raycore warmup: done in {seconds:.1f} s")
     if args.expect_cached and NOTICE.compiled:
         raise CommandError(f"{len(NOTICE.compiled)} functions were compiled, not loaded from "
                            f"the cache, the first {NOTICE.compiled[0]}")
+
+
+def _warm_up_every_level(args, levels):
+    """``raycore warmup`` for each of ``levels`` (:mod:`raycore._target`), in a process of its
+    own: Numba compiles a whole process for one CPU."""
+    from raycore._target import level_settings
+
+    environment = {key: value for key, value in os.environ.items()
+                   if key not in ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES")}
+    for level in levels:
+        print(f"raycore warmup: kernels for {level.name}", flush=True)
+        command = [sys.executable, "-m", "raycore.cli", "warmup", "--dtype", args.dtype]
+        if args.expect_cached:
+            command.append("--expect-cached")
+        if subprocess.run(command, env={**environment, **level_settings(level)}).returncode:
+            raise CommandError(f"the warmup for {level.name} failed")
 
 
 def build_parser():
@@ -102,6 +123,10 @@ def build_parser():
     warmup.add_argument("--expect-cached", action="store_true",
                         help="fail if any kernel has to be compiled rather than loaded from "
                              "the cache (checks a cache that was shipped or warmed before)")
+    warmup.add_argument("--every-level", action="store_true",
+                        help="for every CPU level this machine runs (x86-64-v4, x86-64-v3), "
+                             "each in a process of its own, rather than for this process's: "
+                             "for a cache that other machines will load")
     warmup.set_defaults(run=_warmup)
     for command in (render, cast, bench):
         command.add_parser(commands)

@@ -5,19 +5,20 @@ before a first answer, two minutes for ``raycore warmup``.  A wheel from this sc
 them, and a first answer after ``pip install`` loads them instead (README, "Install").
 
 Numba keys a cached kernel on the Python version, Numba's version, the contents of the source
-file, the argument types and the CPU it was compiled for (raycore's kernels are compiled for the
-portable x86-64-v3 level: :mod:`raycore._target`).  The kernels made here are therefore loaded
-on any x86-64-v3 machine that runs the same Python and Numba versions; elsewhere Numba passes
-them over and compiles at first use, as without them.
+file, the argument types and the CPU it was compiled for (raycore's kernels are compiled for a
+micro-architecture level, x86-64-v4 or x86-64-v3: :mod:`raycore._target`).  The kernels are
+made here for every level this machine runs, and are therefore loaded on any machine of those
+levels that runs the same Python and Numba versions; elsewhere Numba passes them over and
+compiles at first use, as without them.
 
 For each interpreter given (each with raycore's dependencies installed, as a project virtual
 environment has them):
 
 1. the wheel is unpacked into a temporary folder;
-2. ``raycore warmup`` runs on the unpacked package in a fresh process, which writes the kernels
-   into the package's ``__pycache__`` folders (``NUMBA_CACHE_DIR`` and ``NUMBA_CPU_*`` removed
-   from its environment, so that they land there and for the portable target);
-3. ``raycore warmup --expect-cached`` runs in another fresh process, and fails if any kernel
+2. ``raycore warmup --every-level`` runs on the unpacked package in fresh processes, which
+   write the kernels into the package's ``__pycache__`` folders (``NUMBA_CACHE_DIR`` and
+   ``NUMBA_CPU_*`` removed from their environment, so that they land there, for each level);
+3. ``raycore warmup --every-level --expect-cached`` runs in others, and fails if any kernel
    compiles rather than loads.
 
 Then the wheel is packed again with the kernels (``wheel pack``, which writes its RECORD), in
@@ -62,15 +63,14 @@ def _run(command, cwd, **settings):
 def compile_into(package_root, python, dtype):
     """Compile raycore's kernels into the unpacked wheel at ``package_root`` with interpreter
     ``python``, then check that a fresh process loads every one of them."""
-    # the interpreter must import the unpacked package (not an installed raycore) and compile
-    # for the portable target
+    # the interpreter must import the unpacked package (not an installed raycore) and run one
+    # of raycore's levels
     check = _imports_raycore_from(repr(str(package_root))) + (
         "import raycore._target as target; "
-        "assert raycore.info()['cpu'] == target.PORTABLE_CPU, "
-        "'this machine cannot compile for ' + target.PORTABLE_CPU")
+        "assert target.runnable_levels(), 'this machine runs none of ' + str(target.LEVELS)")
+    warmup = ["-m", "raycore.cli", "warmup", "--every-level", "--dtype", dtype]
     with tempfile.TemporaryDirectory() as elsewhere:  # not the repository: its raycore
-        for command in (["-c", check], ["-m", "raycore.cli", "warmup", "--dtype", dtype],
-                        ["-m", "raycore.cli", "warmup", "--dtype", dtype, "--expect-cached"]):
+        for command in (["-c", check], warmup, warmup + ["--expect-cached"]):
             _run([python, *command], elsewhere, PYTHONPATH=str(package_root))
 
 

@@ -4,8 +4,9 @@ Built by ``python -m build`` and installed with its service extra in a new virtu
 with its dependencies from the package index and no Numba cache on the machine for it, a first
 answer loads every kernel it needs from the wheel and compiles none: with ``build()`` called
 first, and when ``intersect`` builds the scene; and ``raycore serve`` serves the demo scene.
-Every kernel in it is keyed on the portable target only, so another x86-64-v3 machine loads
-it as this one does (only one machine is at hand).  The wheel here carries the float32 kernels
+Every kernel in it is keyed on one of raycore's CPU levels, those this machine runs
+(x86-64-v4, x86-64-v3), so that another machine of those levels loads it as this one does (only
+one machine is at hand).  The wheel here carries the float32 kernels
 (the script's and the demo's), compiled by this interpreter."""
 
 import json
@@ -21,7 +22,7 @@ import numpy as np
 import pytest
 
 from raycore._compile_notice import MESSAGE
-from raycore._target import PORTABLE_CPU, PORTABLE_FEATURES, host_runs_portable_code
+from raycore._target import LEVELS, runnable_levels
 from service.process import service_process
 
 SHIP = Path(__file__).resolve().parents[1] / "release" / "ship_kernels.py"
@@ -52,8 +53,8 @@ print(json.dumps({"t": hits.t.tolist(), "geom_id": hits.geom_id.tolist(),
 
 @pytest.fixture(scope="module")
 def wheel_environment(tmp_path_factory):
-    if not host_runs_portable_code():
-        pytest.skip(f"this machine cannot run {PORTABLE_CPU} code, which the wheel ships")
+    if not runnable_levels():
+        pytest.skip(f"this machine runs none of {LEVELS}, for which the wheel ships kernels")
     folder = tmp_path_factory.mktemp("wheel")
     run = subprocess.run([sys.executable, str(SHIP), "--dest", str(folder / "dist"), "--dtype",
                           "float32", "--install-into", str(folder / "venv")],
@@ -70,7 +71,7 @@ def wheel_file(wheel_environment):
 
 def test_the_wheels_kernels_are_keyed_on_nothing_of_this_machine(wheel_file):
     # Numba loads a cached kernel where its index key's codegen part (target triple, CPU name,
-    # CPU features) equals the running process's: here the portable target's, on any machine
+    # CPU features) equals the running process's: here a level's, on any machine of it
     keys = []
     with zipfile.ZipFile(wheel_file) as wheel:
         for name in wheel.namelist():
@@ -80,7 +81,7 @@ def test_the_wheels_kernels_are_keyed_on_nothing_of_this_machine(wheel_file):
                     _, overloads = pickle.loads(index.read())
                 keys += [key[1] for key in overloads]
     assert len(keys) > 50
-    assert {codegen[1:] for codegen in keys} == {(PORTABLE_CPU, PORTABLE_FEATURES)}
+    assert {codegen[1:] for codegen in keys} == set(runnable_levels())
 
 
 @pytest.mark.parametrize("how", ["build", "intersect builds"])
@@ -91,7 +92,7 @@ def test_a_first_answer_from_the_wheel_compiles_nothing(wheel_environment, how, 
     assert run.returncode == 0, run.stderr[-3000:]
     answer = json.loads(run.stdout.splitlines()[-1])
     assert answer["module"].startswith(str(wheel_environment))  # the wheel, not the tree
-    assert answer["cpu"] == PORTABLE_CPU
+    assert answer["cpu"] == runnable_levels()[0].name
     assert answer["compiled"] == [] and MESSAGE not in run.stderr, run.stderr[-3000:]
     assert np.all(np.array(answer["geom_id"]) == 0)
     np.testing.assert_array_equal(answer["t"], 5.0)  # z = 5 to z = 0: exact in float32
