@@ -103,7 +103,7 @@ image-test:
 # CPU level this machine runs: x86-64-v4, x86-64-v3), so that a first answer after `pip install`
 # loads them: one Python version per interpreter in WHEEL_PYTHONS, each in an environment with
 # raycore's dependencies (make wheel WHEEL_PYTHONS=".venv/bin/python .venv-py313/bin/python").
-# About 4 minutes a level and Python on 2 cores.
+# About 5 minutes a Python (both levels) on 2 cores.
 WHEEL_PYTHONS ?= $(BIN)/python
 wheel: $(VENV)/.dev-installed
 	$(BIN)/python release/ship_kernels.py --dest dist --python $(WHEEL_PYTHONS)

@@ -145,7 +145,9 @@ def main(argv=None):
     shutil.rmtree(args.dest, ignore_errors=True)
     os.makedirs(args.dest)
     wheel = build_wheel(args.dest)
-    count = ship_kernels(wheel, args.python, args.dtype)
+    # absolute, since each runs in a temporary folder; not resolved, which would leave a virtual
+    # environment's python for the interpreter it links to
+    count = ship_kernels(wheel, [os.path.abspath(python) for python in args.python], args.dtype)
     print(f"{wheel}: {count} kernel files added", flush=True)
     if args.install_into:
         install_into(args.install_into, wheel)
