@@ -65,15 +65,19 @@ def runnable_levels():
             if all(host.get(feature[1:], False) for feature in level.features.split(","))]
 
 
+#: Numba's settings of the CPU it compiles for.
+CPU_SETTINGS = ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES")
+
+
 def level_settings(level):
-    """The environment that makes Numba compile for ``level``."""
-    return {"NUMBA_CPU_NAME": level.name, "NUMBA_CPU_FEATURES": level.features}
+    """The environment (:data:`CPU_SETTINGS`) that makes Numba compile for ``level``."""
+    return dict(zip(CPU_SETTINGS, level, strict=True))
 
 
 def chosen_level():
     """The level this process should compile for: the best this machine runs, or None when
     the user or Numba chose already (see the module docstring), or it runs none."""
-    if "NUMBA_CPU_NAME" in os.environ or "NUMBA_CPU_FEATURES" in os.environ:
+    if any(name in os.environ for name in CPU_SETTINGS):
         return None
     if "_toplevel_target_context" in cpu_target.__dict__:  # Numba's codegen is set up already
         return None

@@ -68,8 +68,9 @@ def _warmup(args):
     from raycore._target import runnable_levels
     from raycore._warmup import DTYPES, warm_up
 
-    if args.every_level and runnable_levels():
-        _warm_up_every_level(args, runnable_levels())
+    levels = runnable_levels() if args.every_level else []
+    if levels:
+        _warm_up_every_level(args, levels)
         return
     dtypes = DTYPES if args.dtype == "both" else (args.dtype,)
     seconds = warm_up(dtypes)
@@ -82,10 +83,9 @@ def _warmup(args):
 def _warm_up_every_level(args, levels):
     """``raycore warmup`` for each of ``levels`` (:mod:`raycore._target`), in a process of its
     own: Numba compiles a whole process for one CPU."""
-    from raycore._target import level_settings
+    from raycore._target import CPU_SETTINGS, level_settings
 
-    environment = {key: value for key, value in os.environ.items()
-                   if key not in ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES")}
+    environment = {key: value for key, value in os.environ.items() if key not in CPU_SETTINGS}
     for level in levels:
         print(f"raycore warmup: kernels for {level.name}", flush=True)
         command = [sys.executable, "-m", "raycore.cli", "warmup", "--dtype", args.dtype]

@@ -369,12 +369,15 @@ class _BandMemory:
     def __init__(self):
         self._arrays = {}
 
-    def take(self, name, shape, dtype):
+    def take(self, name, shape, dtype, fill=None):
         """Array ``name`` with ``shape`` (its rows first) and ``dtype``: the first rows of the
-        one made before, or a new one if that is too short."""
+        one made before, or a new one if that is too short, with ``fill`` (if given: a value
+        the same for every band) written into every row once, when it is made."""
         array = self._arrays.get(name)
         if array is None or len(array) < shape[0]:
             array = self._arrays[name] = empty_aligned(shape, dtype)
+            if fill is not None:
+                array[:] = fill
         return array[:shape[0]]
 
 
@@ -439,10 +442,11 @@ def _shadow_rays(hits, smooth, light, chunk, memory):
                 lit_origins, counts)
     starts = np.cumsum(counts) - counts
     lit = int(counts.sum())
-    # room for every ray's, so that the first band's arrays serve the others
+    # room for every ray's, so that the first band's arrays serve the others; every shadow
+    # ray goes towards the light, written once for the whole render
     origins = memory.take("shadow_origins", (n, 3), dtype)[:lit]
-    directions = memory.take("shadow_directions", (n, 3), dtype)[:lit]
-    _gather_shadow_rays(lit_origins, counts, starts, chunk, light, origins, directions)
+    directions = memory.take("shadow_directions", (n, 3), dtype, fill=light)[:lit]
+    _gather_shadow_rays(lit_origins, counts, starts, chunk, origins)
     return cosine, starts, origins, directions
 
 
@@ -530,20 +534,16 @@ def _offset_coordinate(point, reach, normal, near, float_scale, int_scale):
 
 
 @njit(cache=True, parallel=True, _nrt=False)
-def _gather_shadow_rays(lit_origins, counts, starts, chunk, light, origins, directions):
-    """The shadow rays of :func:`_light_items`' work items end to end: item ``c``'s
+def _gather_shadow_rays(lit_origins, counts, starts, chunk, origins):
+    """The shadow ray origins of :func:`_light_items`' work items end to end: item ``c``'s
     ``counts[c]`` origins, from row ``c * chunk`` of ``lit_origins``, to rows ``starts[c]`` on
-    of ``origins``, and the light's direction in the same rows of ``directions``."""
-    light_x, light_y, light_z = light[0], light[1], light[2]
+    of ``origins``."""
     for item in prange(len(counts)):
         for k in range(counts[item]):
             row = starts[item] + k
             origins[row, 0] = lit_origins[item * chunk + k, 0]
             origins[row, 1] = lit_origins[item * chunk + k, 1]
             origins[row, 2] = lit_origins[item * chunk + k, 2]
-            directions[row, 0] = light_x
-            directions[row, 1] = light_y
-            directions[row, 2] = light_z
 
 
 @njit(cache=True, parallel=True, _nrt=False)
