@@ -179,14 +179,17 @@ def test_samples_reduce_edge_aliasing_averaged_in_linear_light():
     edge = (expected > 0) & (expected < 255)
     assert edge.sum() >= size  # the edge crosses every row
     assert errors[16] < errors[1] / 3
-    # averaged in linear light: a half-covered pixel is sRGB 188, not 128 (a display mean)
-    rays = orthographic_rays([0.0, 0.0, -5.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], view, size,
-                             size, samples=16)
-    image = render(scene, *rays, size, size, "lambert", samples=16, colors=[[1.0, 1.0, 1.0]],
-                   ambient=1.0)[..., 0].astype(float)
-    coverage = _edge_coverage(size, size, view)
-    display_mean = np.round(255 * coverage)
-    assert np.abs(image - expected)[edge].mean() < np.abs(image - display_mean)[edge].mean() / 4
+    # averaged in linear light: a pixel k of whose 16 samples hit is sRGB of k / 16 (a half-
+    # covered one 188), not the mean of the samples' sRGB values (a display mean, 128); which
+    # samples hit is found from their origins, on the triangle's side of its edge
+    origins, directions = orthographic_rays([0.0, 0.0, -5.0], [0.0, 0.0, 0.0],
+                                            [0.0, 1.0, 0.0], view, size, size, samples=16)
+    image = render(scene, origins, directions, size, size, "lambert", samples=16,
+                   colors=[[1.0, 1.0, 1.0]], ambient=1.0)
+    inside = origins[:, 0] < 0.3 + 0.4 * origins[:, 1]
+    hit_fraction = inside.reshape(size, size, 16).mean(axis=2)
+    assert ((hit_fraction > 0) & (hit_fraction < 1)).sum() >= size
+    np.testing.assert_array_equal(image[..., 0], _srgb8(hit_fraction))
 
 
 def test_camera_samples_are_stratified_and_seeded():
@@ -200,6 +203,26 @@ def test_camera_samples_are_stratified_and_seeded():
     x, y = (1 - origins[:, 0]) / 2, (1 - origins[:, 1]) / 2
     cells = np.floor(x * 3).astype(int) + 3 * np.floor(y * 3).astype(int)
     np.testing.assert_array_equal(np.sort(cells), np.arange(9))
+
+
+def test_camera_jitter_is_uniform_and_its_axes_independent():
+    # each sample's offset within its stratum, across and down, over 64x64 pixels of 4
+    # samples: uniform in [0, 1) and uncorrelated between the axes and between seeds (one
+    # hash for both axes, or the same keys, would make them equal); 16,384 offsets, so a
+    # correlation's standard deviation is about 0.008
+    def offsets(seed):
+        origins, _ = orthographic_rays([0, 0, 0], [0, 0, 1], [0, 1, 0], 2.0, 64, 64,
+                                       samples=4, seed=seed)
+        # camera right is -x looking down +z; a 2x2 stratum is half a pixel of 1/32
+        return ((1 - origins[:, 0]) * 64) % 1, ((1 - origins[:, 1]) * 64) % 1
+
+    across, down = offsets(0)
+    for offset in (across, down):
+        assert abs(offset.mean() - 0.5) < 0.01 and abs(offset.var() - 1 / 12) < 0.005
+        counts, _ = np.histogram(offset, 8, (0, 1))
+        assert counts.min() > 0.9 * len(offset) / 8
+    assert abs(np.corrcoef(across, down)[0, 1]) < 0.05
+    assert abs(np.corrcoef(across, offsets(1)[0])[0, 1]) < 0.05
 
 
 @pytest.mark.parametrize("shading", ["lambert", "depth"])
