@@ -469,6 +469,8 @@ def intersect_triangles(
         _as_triangle_vertices(value, name, count, precision)
         for value, name in ((a, "a"), (b, "b"), (c, "c"))
     )
+    if not len(a) == len(b) == len(c):  # one shared vertex among per-ray ones: a row for each
+        a, b, c = (np.repeat(x, count // len(x), axis=0) for x in (a, b, c))
     t = np.empty(count, dtype=precision)
     uv_out = np.full((count if uv else 0, 2), np.nan, dtype=precision)
     normal_out = np.full((count if normal else 0, 3), np.nan, dtype=precision)

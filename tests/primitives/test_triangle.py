@@ -69,6 +69,24 @@ def rates(hit):
 # ----------------------------------------------------------------------------- analytic cases
 
 
+@pytest.mark.parametrize("shared", ["a", "b", "c", "ab", "bc", "ac"])
+def test_shared_and_per_ray_vertices_mix(shared):
+    # ray i aims at the unit triangle moved 10 i along x; the vertices named in ``shared`` are
+    # given once, as those of triangle 0, the others per ray: each ray then meets the triangle
+    # it is given (its own, or one stretched to reach it from triangle 0's shared vertices)
+    count = 4
+    shift = np.c_[10.0 * np.arange(count), np.zeros(count), np.zeros(count)]
+    vertices = {name: np.add(shift, corner) for name, corner in zip("abc", (A, B, C))}
+    given = {name: vertices[name][0] if name in shared else vertices[name] for name in "abc"}
+    tiled = {name: np.broadcast_to(value, (count, 3)) for name, value in given.items()}
+    origins, directions = shift + [0.2, 0.2, -1.0], np.tile([0.0, 0.0, 1.0], (count, 1))
+    got = intersect_triangles(origins, directions, **given, uv=True)
+    want = intersect_triangles(origins, directions, **tiled, uv=True)
+    np.testing.assert_array_equal(got.t, want.t)
+    np.testing.assert_array_equal(got.uv, want.uv)
+    assert got.t[0] == 1.0
+
+
 @pytest.mark.parametrize("dtype", DTYPES)
 @pytest.mark.parametrize("test", TESTS)
 def test_interior_hit_gives_t_barycentrics_normal(test, dtype):
