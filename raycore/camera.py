@@ -32,7 +32,7 @@ def _frame(position, look_at, up):
     return position, right, np.cross(right, forward), forward
 
 
-def _check_size(width, height):
+def check_size(width, height):
     """``ValueError`` naming ``width`` or ``height`` unless both are positive integers."""
     for name, value in (("width", width), ("height", height)):
         if not isinstance(value, (int, np.integer)) or value < 1:
@@ -41,7 +41,7 @@ def _check_size(width, height):
 
 def _pixel_grid(width, height):
     """Pixel centres in [-1, 1]: x of each column (to the right), y of each row (upwards), of
-    a size :func:`_check_size` accepts."""
+    a size :func:`check_size` accepts."""
     x = (np.arange(width) + 0.5) / width * 2 - 1
     y = 1 - (np.arange(height) + 0.5) / height * 2
     return x, y
@@ -300,7 +300,7 @@ def perspective_rays(position, look_at, up, fov, width, height, dtype="float64",
 def perspective_camera(position, look_at, up, fov, width, height):
     """The :class:`Camera` of :func:`perspective_rays` (see there for the arguments)."""
     _check_fov(fov)
-    _check_size(width, height)
+    check_size(width, height)
     position, right, true_up, forward = _frame(position, look_at, up)
     # the image plane at distance 1
     half_height = np.tan(np.radians(fov) / 2)
@@ -342,7 +342,7 @@ def orthographic_camera(position, look_at, up, view_height, width, height):
     """The :class:`Camera` of :func:`orthographic_rays` (see there for the arguments)."""
     if not (np.isfinite(view_height) and view_height > 0):
         raise ValueError(f"view_height must be positive and finite, got {view_height!r}")
-    _check_size(width, height)
+    check_size(width, height)
     position, right, true_up, forward = _frame(position, look_at, up)
     return Camera(position, right, true_up, view_height / 2 * width / height, view_height / 2,
                   width, height, forward, unit=False)
@@ -391,7 +391,7 @@ def frame_box(lo, hi, width, height, *, fov=45.0, position=None, look_at=None,
     _check_fov(fov)
     if not 0 < fill <= 1:
         raise ValueError(f"fill must be in (0, 1], got {fill!r}")
-    _check_size(width, height)
+    check_size(width, height)
     lo = as_float_array(lo, "lo", np.float64, (3,))
     hi = as_float_array(hi, "hi", np.float64, (3,))
     if np.any(lo > hi):

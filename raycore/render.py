@@ -21,9 +21,10 @@ from numba import njit, prange, vectorize
 from raycore._fp import like
 from raycore._memory import empty_aligned
 from raycore.bvh.record import tabled_arrays_of
-from raycore.camera import strata
+from raycore.camera import check_size, strata
 from raycore.offset import offset_constants, offset_coordinate
 from raycore.queries import hit_surface
+from raycore.rays import as_float_array
 from raycore.shading import interpolated_normal
 
 SHADINGS = ("depth", "normal", "lambert", "id")
@@ -76,6 +77,7 @@ def render(scene, origins, directions, width, height, shading="lambert", *, samp
     ValueError
         Naming the argument that is wrong.
     """
+    check_size(width, height)
     _, _, weights = strata(samples)
     # in the scene's precision, which the shadow rays start from
     origins = np.asarray(origins, dtype=scene.dtype)
@@ -139,10 +141,13 @@ def _render(scene, band_rays, width, height, shading, weights, smooth, light_dir
     (:class:`_BandMemory`, or None for the whole image at once) holds arrays it may reuse."""
     if shading not in SHADINGS:
         raise ValueError(f"shading must be one of {SHADINGS}, got {shading!r}")
-    if not 0 <= ambient <= 1:
-        raise ValueError(f"ambient must be in [0, 1], got {ambient!r}")
+    if not isinstance(ambient, (int, float, np.integer, np.floating)) or not 0 <= ambient <= 1:
+        raise ValueError(f"ambient must be a number in [0, 1], got {ambient!r}")
+    background = as_float_array(background, "background", np.float64, (3,))
+    if np.any(background < 0) or np.any(background > 255):
+        raise ValueError(f"background must be sRGB values in [0, 255], got {background}")
     samples = len(weights)
-    background = srgb_to_linear(np.asarray(background, np.float64) / 255).astype(np.float32)
+    background = srgb_to_linear(background / 255).astype(np.float32)
     image = np.empty((height, width, 3), np.uint8)
     if shading == "lambert":
         light, colors = _unit_light(light_direction), _color_table(colors, len(scene))
@@ -202,6 +207,7 @@ def render_arrays(scene, origins, directions, width, height, shading, *, smooth=
     """
     if shading not in ARRAY_SHADINGS:
         raise ValueError(f"shading must be one of {ARRAY_SHADINGS} for arrays, got {shading!r}")
+    check_size(width, height)
     if np.shape(origins) != (width * height, 3):
         raise ValueError(f"origins must have shape ({width * height}, 3) for a {width}x{height} "
                          f"image, got {np.shape(origins)}")
@@ -306,19 +312,21 @@ def _resolve(linear, weights, thresholds, guesses, image):
 
 
 def _unit_light(light_direction):
-    light = np.asarray(light_direction, dtype=np.float64)
-    if light.shape != (3,) or not np.all(np.isfinite(light)) or not np.any(light):
-        raise ValueError("light_direction must be a finite non-zero 3-vector, "
-                         f"got {light_direction!r}")
+    light = as_float_array(light_direction, "light_direction", np.float64, (3,))
+    if not np.any(light):
+        raise ValueError("light_direction must not be zero")
+    light = light / np.max(np.abs(light))  # so that its squares neither overflow nor vanish
     return light / np.linalg.norm(light)
 
 
 def _color_table(colors, count):
     if colors is None:
         return np.tile(np.asarray(DEFAULT_COLOR), (count, 1))
-    colors = np.asarray(colors, dtype=np.float64)
+    colors = as_float_array(colors, "colors", np.float64)
     if colors.ndim != 2 or colors.shape[1] != 3 or len(colors) < count:
         raise ValueError(f"colors must have shape ({count}, 3), got {colors.shape}")
+    if np.any(colors < 0) or np.any(colors > 1):
+        raise ValueError("colors must be linear RGB values in [0, 1]")
     return colors
 
 

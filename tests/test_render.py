@@ -116,11 +116,30 @@ def test_id_shading_tells_geometries_apart_and_shows_background():
     ({"light_direction": [0, 0, 0]}, "light_direction"),
     ({"colors": [[1.0, 0.0, 0.0, 1.0]]}, "colors"),
     ({"width": SIZE + 1}, "origins"),
+    ({"width": 0}, "width"),
+    ({"height": 2.5}, "height"),
+    ({"ambient": None}, "ambient"),
+    ({"background": [5]}, "background"),
+    ({"background": [0, 300, 0]}, "background"),
+    ({"background": None}, "background"),
+    ({"colors": [[0.5, np.nan, 0.5]]}, "colors"),
+    ({"colors": [[0.5, 2.0, 0.5]]}, "colors"),
+    ({"light_direction": [1, np.inf, 0]}, "light_direction"),
 ])
 def test_bad_arguments_name_themselves(change, name):
     args = {"width": SIZE, "height": SIZE, "shading": "lambert", **change}
     with pytest.raises(ValueError, match=name):
         render(_sphere_scene(), *_front_view(), **args)
+
+
+def test_a_light_direction_of_any_finite_size_shades_alike():
+    # its squares overflow (1e300) or vanish (1e-300) unless it is scaled before its length
+    images = [render(_sphere_scene(), *_front_view(), SIZE, SIZE, "lambert",
+                     light_direction=np.multiply(scale, [1.0, 1.0, -1.0]))
+              for scale in (1.0, 1e300, 1e-300)]
+    assert len(np.unique(images[0])) > 10
+    np.testing.assert_array_equal(images[1], images[0])
+    np.testing.assert_array_equal(images[2], images[0])
 
 
 def test_lambert_is_srgb_encoded():

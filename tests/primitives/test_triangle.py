@@ -76,7 +76,7 @@ def test_shared_and_per_ray_vertices_mix(shared):
     # it is given (its own, or one stretched to reach it from triangle 0's shared vertices)
     count = 4
     shift = np.c_[10.0 * np.arange(count), np.zeros(count), np.zeros(count)]
-    vertices = {name: np.add(shift, corner) for name, corner in zip("abc", (A, B, C))}
+    vertices = {name: np.add(shift, corner) for name, corner in zip("abc", (A, B, C), strict=True)}
     given = {name: vertices[name][0] if name in shared else vertices[name] for name in "abc"}
     tiled = {name: np.broadcast_to(value, (count, 3)) for name, value in given.items()}
     origins, directions = shift + [0.2, 0.2, -1.0], np.tile([0.0, 0.0, 1.0], (count, 1))
