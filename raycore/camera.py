@@ -12,7 +12,7 @@ import numpy as np
 from numba import get_num_threads, get_thread_id, njit, prange
 
 from raycore._memory import empty_aligned
-from raycore.rays import as_float_array, resolve_dtype
+from raycore.rays import as_float_array, as_real_array, resolve_dtype
 
 
 def _frame(position, look_at, up):
@@ -392,10 +392,12 @@ def frame_box(lo, hi, width, height, *, fov=45.0, position=None, look_at=None,
     if not 0 < fill <= 1:
         raise ValueError(f"fill must be in (0, 1], got {fill!r}")
     check_size(width, height)
-    lo = as_float_array(lo, "lo", np.float64, (3,))
-    hi = as_float_array(hi, "hi", np.float64, (3,))
+    # an empty box is as Scene.bounds gives it, inf above -inf: it may be infinite
+    lo = as_real_array(lo, "lo", np.float64, (3,))
+    hi = as_real_array(hi, "hi", np.float64, (3,))
     if np.any(lo > hi):
         lo, hi = np.full(3, -1.0), np.full(3, 1.0)
+    lo, hi = as_float_array(lo, "lo", np.float64), as_float_array(hi, "hi", np.float64)
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
                         for z in (lo[2], hi[2])])
     look_at = (lo + hi) / 2 if look_at is None else as_float_array(look_at, "look_at",

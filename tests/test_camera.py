@@ -191,3 +191,19 @@ def test_frame_box_keeps_a_given_camera_and_takes_an_empty_box_as_a_cube():
     assert view_height == pytest.approx(2 / 0.9)  # the cube -1..1 seen face-on
     with pytest.raises(ValueError, match="fov"):
         frame_box([0, 0, 0], [1, 1, 1], 10, 10, fov=180)
+
+
+@pytest.mark.parametrize("planes", [0, 1])
+def test_frame_box_takes_the_bounds_of_a_scene_with_nothing_bounded(planes):
+    # Scene.bounds of an empty scene, or of planes only, is (inf, -inf): the cube -1..1
+    from raycore import Scene
+    from raycore.camera import frame_box
+
+    scene = Scene()
+    for _ in range(planes):
+        scene.add_plane([0, 0, 0], [0, 1, 0])
+    cube = frame_box([-1, -1, -1], [1, 1, 1], 8, 8)
+    for got, want in zip(frame_box(*scene.bounds, 8, 8), cube, strict=True):
+        np.testing.assert_array_equal(got, want)
+    with pytest.raises(ValueError, match="lo"):  # a box that is not empty must be finite
+        frame_box([0, 0, -np.inf], [1, 1, 1], 8, 8)
