@@ -200,6 +200,10 @@ def read(source, *, mmap=False):
     """
     # read into memory that starts on a cache line, as a map's pages do, so that the arrays,
     # on 64-byte boundaries of the file, start on lines too (raycore.bvh.leaves.empty_blocks)
+    if not isinstance(source, (str, os.PathLike, bytes, bytearray, memoryview)):
+        # open() would take an integer as a file descriptor, and close it
+        raise ValueError(f"path must be a file path (str or os.PathLike) or the file's bytes, "
+                         f"got {type(source).__name__}")
     if isinstance(source, (bytes, bytearray, memoryview)):
         raw = empty_on_line(len(source), np.uint8)  # aligned and writable
         raw[:] = np.frombuffer(source, np.uint8)
@@ -317,7 +321,7 @@ def _array(raw, entry, start, version, mapping):
         array = np.ndarray(shape, dtype, raw, offset)  # (buffer, offset: by keyword, 50% dearer)
         if array.shape != tuple(shape):  # a length of -1, which np.ndarray takes as "the rest"
             raise ValueError(f"shape {shape}")
-    except (ValueError, TypeError) as error:
+    except (ValueError, TypeError, OverflowError) as error:  # OverflowError: past 2^63
         raise ValueError(f"the scene file is corrupt (array {name!r} lies outside it or has a "
                          f"bad shape: {error})") from error
     # the header's list is compared as it is: a wrong count of checksums does not match either

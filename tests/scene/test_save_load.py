@@ -5,6 +5,7 @@ crafted or newer."""
 import json
 import pickle
 import struct
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -209,6 +210,29 @@ def test_other_files_and_newer_versions_are_refused(saved, tmp_path):
         Scene.load(newer)
     with pytest.raises(ValueError, match="not a raycore scene file"):
         scene_file.load(b"nothing at all here!!")
+
+
+def test_a_path_that_is_not_a_path_is_refused():
+    # an integer would be opened as a file descriptor (and closed): 1 is stdout
+    for path in (1, True, None, 2.5):
+        with pytest.raises(ValueError, match="path must be a file path"):
+            Scene.load(path)
+
+
+def test_header_entry_with_an_offset_past_int64_is_refused(saved, tmp_path):
+    # a header that passes its checksum but places an array at 2^63 bytes
+    _, _, path, _ = saved
+    data = path.read_bytes()
+    magic, version, length, _ = struct.unpack_from("<8sIII", data)
+    header = json.loads(data[20:20 + length])
+    header["arrays"][0][3] = 2**63
+    text = json.dumps(header).encode()
+    prefix = struct.pack("<8sIII", magic, version, len(text), zlib.crc32(text)) + text
+    start = -(-(20 + length) // arrayfile.ALIGN) * arrayfile.ALIGN
+    bad = tmp_path / "offset.rcs"
+    bad.write_bytes(prefix + bytes(-len(prefix) % arrayfile.ALIGN) + data[start:])
+    with pytest.raises(ValueError, match="corrupt"):
+        Scene.load(bad)
 
 
 def rewritten(path, tmp_path, change):
