@@ -80,7 +80,8 @@ def offset_ray_origin(points, normals, directions, *, error=None):
         Hit points on surfaces.  float32 input is offset in float32 (and returned as float32);
         anything else in float64.
     normals : array_like, shape (N, 3)
-        Unit surface normals at the points; their orientation does not matter.
+        Surface normals at the points, of any non-zero length (they are scaled to unit
+        length); their orientation does not matter.
     directions : array_like, shape (N, 3)
         Directions of the new rays: the origins move to the side of the surface these point to.
     error : array_like, shape (N,) or (N, 3), optional
@@ -98,13 +99,21 @@ def offset_ray_origin(points, normals, directions, *, error=None):
     Raises
     ------
     ValueError
-        Naming the argument: wrong shape, NaN or inf entries, negative errors.
+        Naming the argument: wrong shape, NaN or inf entries, zero normals, negative errors.
     """
     points = np.asarray(points)
     dtype = np.float32 if points.dtype == np.float32 else np.float64
     points = as_float_array(points, "points", dtype, (None, 3))
     shape = (len(points), 3)
     normals = as_float_array(normals, "normals", dtype, shape)
+    # unit length, which the steps (int_scale * n units in the last place) assume: a normal of
+    # 1e17 stepped by an overflowed count; scaled to its largest component first, so that its
+    # squares neither overflow nor vanish
+    largest = np.max(np.abs(normals), axis=1, keepdims=True)
+    if np.any(largest == 0):
+        raise ValueError("normals must be non-zero")
+    normals = normals / largest
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     directions = as_float_array(directions, "directions", dtype, shape)
     if error is None:
         reach = np.zeros(len(points))

@@ -115,9 +115,21 @@ def test_offset_goes_to_the_side_of_the_new_direction():
     assert offset_ray_origin(points, -normal, [[0.0, 1.0, 0.0]])[0, 1] > 5.0
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_normals_of_any_length_offset_as_unit_ones(dtype):
+    # the offset steps int_scale * n units in the last place: a long normal overflowed them
+    points = np.array([[1.0, 2.0, 3.0], [1e6, -1e6, 5e5]], dtype)
+    unit = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]], dtype)
+    want = offset_ray_origin(points, unit, unit)
+    for scale in (1e-30, 1e8, 1e17 if dtype == np.float32 else 1e300):
+        normals = (unit.astype(np.float64) * scale).astype(dtype)
+        np.testing.assert_array_equal(offset_ray_origin(points, normals, unit), want)
+
+
 @pytest.mark.parametrize("bad", [
     {"points": [[np.nan, 0, 0]]},
     {"normals": [[0, 0]]},
+    {"normals": [[0, 0, 0]]},
     {"directions": [[0, 0, 1], [0, 0, 1]]},
     {"error": [-1.0]},
 ])
