@@ -47,6 +47,12 @@ def as_unit(vector, name, message="must be non-zero"):
     # not np.linalg.norm: its dot product runs an OpenBLAS kernel whose last bit depends on the CPU
     x, y, z = np.asarray(vector, np.float64).tolist()
     length = math.sqrt((x * x + y * y) + z * z)
+    largest = max(abs(x), abs(y), abs(z))
+    if not (length > 0 and math.isfinite(length)) and 0 < largest < math.inf:
+        # its squares overflowed (from about 1e154) or vanished: scaled to its largest component
+        # first (only then, so that every other vector keeps the bits it had)
+        x, y, z = x / largest, y / largest, z / largest
+        length = largest * math.sqrt((x * x + y * y) + z * z)
     if not (length > 0 and math.isfinite(length)):
         raise ValueError(f"{name} {message}")
     return vector / length, length

@@ -22,6 +22,17 @@ def intersect(origins, directions, dtype="float64", point=(0, 0, 0), normal_vect
 # ---------------------------------------------------------------------------- analytic cases
 
 
+@pytest.mark.parametrize("scale", [2.0**520, 2.0**-560, 2.0**-1070])
+def test_a_normal_of_any_finite_length_is_the_same_plane(scale):
+    # the normal's squares overflow or vanish at these lengths: it must not be taken as zero;
+    # scaled by powers of two, it is exactly the same direction
+    rng = np.random.default_rng(5)
+    origins, directions = rng.normal(size=(200, 3)) * 4, rng.normal(size=(200, 3))
+    want = intersect(origins, directions, normal_vector=NORMAL)
+    got = intersect(origins, directions, normal_vector=NORMAL * scale)
+    np.testing.assert_array_equal(got.t, want.t)
+
+
 @pytest.mark.parametrize(
     ("origin", "direction", "expected"),
     [
