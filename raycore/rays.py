@@ -98,10 +98,7 @@ def as_ray_bound(value, name, count, dtype):
 
     Infinity is allowed (``tmax=np.inf`` is the usual "no limit"); NaN is not.
     """
-    try:
-        array = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"{name} must be a number or an (N,) array of numbers") from error
+    array = _real_bound(value, name).astype(np.float64)
     if array.ndim != 0 and array.shape != (count,):
         raise ValueError(f"{name} must be a scalar or have shape ({count},), got {array.shape}")
     if np.any(np.isnan(array)):
@@ -169,20 +166,38 @@ def _as_bound(value, name, count, dtype):
         shared = _SCALAR_BOUNDS[dtype]
         array = shared.get(value)
         if array is None:
-            array = np.full(1, value, dtype)
+            try:
+                array = np.full(1, value, dtype)
+            except OverflowError as error:  # an int past what a float holds (10**400)
+                raise ValueError(f"{name} must be a number that a float holds") from error
             if len(shared) < 32:
                 shared[value] = array
         return array
-    try:
-        array = np.asarray(value, dtype=np.float64) if not isinstance(value, np.ndarray) \
-            or value.dtype.kind not in "biuf" else value
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"{name} must be a number or an (N,) array of numbers") from error
+    array = _real_bound(value, name)
     if array.ndim == 0:
         return np.full(1, array, dtype)
     if array.shape != (count,):
         raise ValueError(f"{name} must be a scalar or have shape ({count},), got {array.shape}")
     return _kernel_array(array, dtype)
+
+
+def _real_bound(value, name):
+    """``value`` as an array of real numbers, or ``ValueError`` naming ``name``: complex ones
+    (whose imaginary parts a cast to float drops), strings, objects and ints past a float's
+    range (10**400) are refused."""
+    if type(value) is int:  # past int64 NumPy would make an object of it
+        try:
+            value = float(value)
+        except OverflowError as error:
+            raise ValueError(f"{name} must be a number that a float holds") from error
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError, OverflowError) as error:
+        raise ValueError(f"{name} must be a number or an (N,) array of numbers") from error
+    if array.dtype.kind not in "biuf":
+        raise ValueError(f"{name} must be a real number or an (N,) array of real numbers, got "
+                         f"dtype {array.dtype}")
+    return array
 
 
 _SCALAR_BOUNDS = {np.dtype(np.float32): {}, np.dtype(np.float64): {}}

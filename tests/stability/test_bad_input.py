@@ -78,6 +78,22 @@ def test_nan_bounds_raise_and_inf_tmax_is_no_limit(bound, dtype):
     assert np.all(hits.t == 4.0)
 
 
+@pytest.mark.parametrize("bad", [10**400, np.array([4.5 + 1j]), "5", [None]])
+@pytest.mark.parametrize("bound", ["tmin", "tmax"])
+def test_bounds_that_are_not_real_numbers_raise(bound, bad):
+    # an int past a float's range, a complex number (whose imaginary part a cast drops), a
+    # string, an object: refused by the scene's queries and the batch kernels alike
+    scene = every_shape("float64")
+    origins, directions = _rays([0, 0, -5], [0, 0, 1])
+    for call in (scene.intersect, scene.count,
+                 functools.partial(analytic.intersect_sphere, center=[0, 0, 0], radius=1.0)):
+        with pytest.raises(ValueError, match=bound):
+            call(origins, directions, **{bound: bad})
+    # an int a float holds is a bound like any other
+    assert scene.intersect(origins, directions, tmax=10**20).t[0] == 4.0
+    assert analytic.intersect_sphere(origins, directions, [0, 0, 0], 1.0, tmax=10**20).t[0] == 4
+
+
 @pytest.mark.parametrize("dtype", DTYPES)
 def test_batch_kernels_refuse_invalid_rays_too(dtype):
     origins, directions = _rays([0, 0, -5], [0, 0, 0])
