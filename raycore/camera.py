@@ -207,15 +207,17 @@ class Camera(NamedTuple):
         origins, directions : ndarray, shape (rows * width * samples, 3)
             Pixel by pixel in scanline order, a pixel's samples together.
         """
+        seed = _check_seed(seed)
         first, last = (0, self.height) if rows is None else rows
-        if not 0 <= first < last <= self.height:
-            raise ValueError(f"rows must lie in [0, {self.height}], got {rows!r}")
+        if not all(isinstance(row, (int, np.integer)) for row in (first, last)) \
+                or not 0 <= first < last <= self.height:
+            raise ValueError(f"rows must be two integers in [0, {self.height}], got {rows!r}")
         dtype = resolve_dtype(dtype)
         strata_rows, columns, _ = strata(samples)
         shape = ((last - first) * self.width * samples, 3)
         if out is None:
             out = empty_aligned(shape, dtype), empty_aligned(shape, dtype)
-        elif len(out) != 2 or any(
+        elif not isinstance(out, (tuple, list)) or len(out) != 2 or any(
                 not isinstance(a, np.ndarray) or a.shape != shape or a.dtype != dtype
                 or not a.flags.c_contiguous or not a.flags.writeable for a in out):
             raise ValueError(f"out must be two writable C-contiguous {np.dtype(dtype).name} "
@@ -230,7 +232,7 @@ class Camera(NamedTuple):
         else:
             _sample_rays_kernel(self.center, self.right, self.up, float(self.x_scale),
                                 float(self.y_scale), self.width, self.height, first, samples,
-                                strata_rows, columns, np.uint64(seed), self.unit, self.constant,
+                                strata_rows, columns, seed, self.unit, self.constant,
                                 np.empty((get_num_threads(), 3, self.width), dtype), points,
                                 constants)
         return out
@@ -258,9 +260,25 @@ def _plane_rays_kernel(center, right, up, across, rise, unit, constant, points, 
                 constants[row, k] = constant[k]
 
 
+def _real(value, name):
+    """``value`` if it is one real number (a bool is not), else ``ValueError`` naming
+    ``name``: a comparison with None or a string raised TypeError, with an array NumPy's."""
+    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
+        return value
+    raise ValueError(f"{name} must be a real number, got {value!r}")
+
+
 def _check_fov(fov):
-    if not 0 < fov < 180:
+    if not 0 < _real(fov, "fov") < 180:
         raise ValueError(f"fov must be in (0, 180) degrees, got {fov!r}")
+
+
+def _check_seed(seed):
+    """``seed`` as the np.uint64 the jitter takes: an integer in [0, 2^64)."""
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) \
+            or not 0 <= seed < 2**64:
+        raise ValueError(f"seed must be an integer in [0, 2^64), got {seed!r}")
+    return np.uint64(seed)
 
 
 def perspective_rays(position, look_at, up, fov, width, height, dtype="float64", samples=1,
@@ -340,7 +358,7 @@ def orthographic_rays(position, look_at, up, view_height, width, height, dtype="
 
 def orthographic_camera(position, look_at, up, view_height, width, height):
     """The :class:`Camera` of :func:`orthographic_rays` (see there for the arguments)."""
-    if not (np.isfinite(view_height) and view_height > 0):
+    if not (np.isfinite(_real(view_height, "view_height")) and view_height > 0):
         raise ValueError(f"view_height must be positive and finite, got {view_height!r}")
     check_size(width, height)
     position, right, true_up, forward = _frame(position, look_at, up)
@@ -389,7 +407,7 @@ def frame_box(lo, hi, width, height, *, fov=45.0, position=None, look_at=None,
         Naming the argument that is out of range or degenerate.
     """
     _check_fov(fov)
-    if not 0 < fill <= 1:
+    if not 0 < _real(fill, "fill") <= 1:
         raise ValueError(f"fill must be in (0, 1], got {fill!r}")
     check_size(width, height)
     # an empty box is as Scene.bounds gives it, inf above -inf: it may be infinite

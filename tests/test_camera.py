@@ -58,13 +58,20 @@ def test_up_need_not_be_perpendicular():
     ({"width": 0}, "width"),
     ({"height": 2.5}, "height"),
     ({"position": [0.0, np.nan, 0.0]}, "position"),
+    ({"fov": None}, "fov"),
+    ({"fov": "45"}, "fov"),
+    ({"fov": np.array([45.0, 50.0])}, "fov"),
+    ({"samples": 4, "seed": -1}, "seed"),
+    ({"samples": 4, "seed": 2**64}, "seed"),
+    ({"seed": None}, "seed"),
+    ({"samples": 4, "seed": 1.5}, "seed"),
 ])
 def test_bad_perspective_arguments_name_themselves(change, name):
     with pytest.raises(ValueError, match=name):
         perspective_rays(**{**VIEW, "fov": 45.0, "width": 4, "height": 4, **change})
 
 
-@pytest.mark.parametrize("view_height", [0.0, -1.0, np.inf])
+@pytest.mark.parametrize("view_height", [0.0, -1.0, np.inf, None, "2"])
 def test_bad_view_height(view_height):
     with pytest.raises(ValueError, match="view_height"):
         orthographic_rays(**VIEW, view_height=view_height, width=4, height=4)
@@ -124,6 +131,7 @@ def _read_only(array):
     [np.empty((35, 3)), np.empty((35, 6))[:, :3]],  # not contiguous
     [np.empty((35, 3)), _read_only(np.empty((35, 3)))],
     [np.empty((35, 3)), [[0.0] * 3] * 35],  # not an array
+    5,  # not a pair
 ])
 def test_bad_output_arrays(out):
     # the kernels write without bounds checks: a wrong array is refused, not written past
@@ -131,7 +139,7 @@ def test_bad_output_arrays(out):
         perspective_camera(**VIEW, fov=50.0, width=7, height=5).rays("float64", out=out)
 
 
-@pytest.mark.parametrize("rows", [(0, 0), (-1, 2), (3, 2), (0, 6)])
+@pytest.mark.parametrize("rows", [(0, 0), (-1, 2), (3, 2), (0, 6), (0.5, 2)])
 def test_bad_band_of_rows(rows):
     with pytest.raises(ValueError, match="rows"):
         perspective_camera(**VIEW, fov=50.0, width=4, height=5).rays(rows=rows)
