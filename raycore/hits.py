@@ -12,8 +12,11 @@ SURFACE_FIELDS = ("uv", "normal", "point", "shading_normal")
 def check_fields(fields):
     """``fields`` (a name, or names) as a tuple of :data:`SURFACE_FIELDS`; ``ValueError``
     naming the unknown ones."""
-    fields = (fields,) if isinstance(fields, str) else tuple(fields)
-    unknown = [f for f in fields if f not in SURFACE_FIELDS]
+    try:
+        fields = (fields,) if isinstance(fields, str) else tuple(fields)
+    except TypeError as error:  # not iterable
+        raise ValueError(f"fields must be a field name or names, got {fields!r}") from error
+    unknown = [f for f in fields if not isinstance(f, str) or f not in SURFACE_FIELDS]
     if unknown:
         raise ValueError(f"fields must be among {SURFACE_FIELDS}, got {unknown}")
     return fields

@@ -99,7 +99,11 @@ class Mesh:
 
     def __init__(self, vertices, faces):
         vertices = as_float_array(vertices, "vertices", np.float64, (None, 3))
-        faces = np.asarray(faces)
+        try:
+            faces = np.asarray(faces)
+        except (TypeError, ValueError) as error:  # ragged rows
+            raise ValueError(f"faces must be an (F, 3) array of vertex indices: {error}") \
+                from error
         if faces.dtype.kind not in "iu":
             if faces.dtype.kind != "f" or not np.all(np.isfinite(faces)) or np.any(
                     faces != np.round(faces)):

@@ -12,6 +12,8 @@ DTYPES = {"float32": np.float32, "float64": np.float64}
 
 def resolve_dtype(dtype):
     """Return ``np.float32`` or ``np.float64`` for a dtype-like, else raise ``ValueError``."""
+    if dtype is None:  # which NumPy takes as float64
+        raise ValueError("dtype must be 'float32' or 'float64', got None")
     try:
         resolved = np.dtype(dtype).type
     except TypeError as error:

@@ -126,7 +126,7 @@ def lidar_layout(*, preset=None, elevations=None, vertical_fov=None, channels=No
         Naming the argument that is missing, given twice or out of range.
     """
     if preset is not None:
-        if preset not in LIDAR_PRESETS:
+        if not isinstance(preset, str) or preset not in LIDAR_PRESETS:
             raise ValueError(f"preset must be one of {sorted(LIDAR_PRESETS)}, got {preset!r}")
         known = LIDAR_PRESETS[preset]
         if elevations is None and vertical_fov is None:

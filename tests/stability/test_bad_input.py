@@ -14,6 +14,7 @@ import pytest
 from raycore import Scene
 from raycore.primitives import analytic
 from raycore.primitives.triangle import intersect_triangles
+from raycore.sensors import lidar
 from tests.primitives.triangle_reference import tessellated_box
 from tests.stability.catalogue import DTYPES, METHODS, QUADRIC, compare, f32
 from tests.stability.exact import mesh_closest, quadric_closest
@@ -165,3 +166,23 @@ def test_extreme_direction_lengths_measured(exponent, dtype):
         if dtype == "float64" or label.startswith(("triangle", "sphere precise", "cylinder",
                                                      "cone")):
             assert outcome.wrong == 0, label
+
+
+def _scene_with_a_sphere():
+    scene = Scene()
+    scene.add_sphere([0, 0, 0], 1.0)
+    return scene
+
+
+@pytest.mark.parametrize(("call", "name"), [
+    (lambda: _scene_with_a_sphere().intersect([[0, 0, -5]], [[0, 0, 1]], fields=5), "fields"),
+    (lambda: _scene_with_a_sphere().intersect([[0, 0, -5]], [[0, 0, 1]], fields=[None]),
+     "fields"),
+    (lambda: Scene(dtype=None), "dtype"),
+    (lambda: Scene().add_mesh(np.eye(3), [[0, 1, 2], [0, 1]]), "faces"),
+    (lambda: lidar([0, 0, 0], preset=["velodyne-vlp16"]), "preset"),
+])
+def test_other_arguments_of_the_wrong_kind_name_themselves(call, name):
+    # each raised TypeError, or NumPy's message without the argument's name, before
+    with pytest.raises(ValueError, match=name):
+        call()
