@@ -131,7 +131,10 @@ def _rounded32(x, step):
     31 for a float32 ray (fandisk, one thread)."""
     if not _wide(x):
         return np.float32(x)
-    return np.float32(x + step)
+    # beyond float32's range, its largest finite value: an infinite origin less the infinite
+    # planes of a row's unused slots is NaN, which enters them (see _reciprocal32)
+    largest = like(x, np.finfo(np.float32).max)
+    return np.float32(min(max(x + step, -largest), largest))
 
 
 @njit(cache=True, forceinline=True)
@@ -177,9 +180,7 @@ def _box_ray(ox, oy, oz, dx, dy, dz):
         Near-plane origin (x, y, z), far-plane origin, reciprocal, padded reciprocal.
     """
     pad = np.float32(1) + np.float32(2) * gamma(5 + _wide(ox), np.float32(0))
-    ix = np.float32(like(ox, 1) / dx)
-    iy = np.float32(like(ox, 1) / dy)
-    iz = np.float32(like(ox, 1) / dz)
+    ix, iy, iz = _reciprocal32(dx), _reciprocal32(dy), _reciprocal32(dz)
     # forward along an axis (reciprocal >= 0, as enter8 decides): the near plane is the box's
     # low one, whose distance shrinks with the origin rounded up, and the far plane's grows
     # with it rounded down; backward, the other way round.  The reciprocal's sign moves the
@@ -193,6 +194,21 @@ def _box_ray(ox, oy, oz, dx, dy, dz):
     nx, ny, nz = _rounded32(ox, sx), _rounded32(oy, sy), _rounded32(oz, sz)
     fx, fy, fz = _rounded32(ox, -sx), _rounded32(oy, -sy), _rounded32(oz, -sz)
     return (nx, ny, nz, fx, fy, fz, ix, iy, iz, ix * pad, iy * pad, iz * pad)
+
+
+@njit(cache=True, forceinline=True)
+def _reciprocal32(d):
+    """``1 / d`` as a float32; for a float64 ``d`` beyond 2^149, float32's least magnitude
+    rather than 0, whose product with the infinite planes of a row's unused slots is NaN.  A
+    NaN slab distance enters every slot, the unused ones too, whose reference is the root: the
+    stack overflowed and the process crashed (a float64 ray from 1e39 with a direction of 1e46,
+    or an instance scaled by 1e-40; with :func:`_rounded32`'s finite origin).  Such rays, beyond
+    float32's range, may miss what they would hit; they do not crash."""
+    reciprocal = np.float32(like(d, 1) / d)
+    if not _wide(d):
+        return reciprocal
+    least = np.float32(math.copysign(2.0**-149, d))
+    return reciprocal if reciprocal != 0 else least
 
 
 @njit(cache=True, inline="always", error_model="numpy")

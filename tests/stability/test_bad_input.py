@@ -186,3 +186,22 @@ def test_other_arguments_of_the_wrong_kind_name_themselves(call, name):
     # each raised TypeError, or NumPy's message without the argument's name, before
     with pytest.raises(ValueError, match=name):
         call()
+
+
+def test_rays_and_instances_beyond_float32s_range_answer_without_crashing():
+    # float64 rays whose origins lie beyond float32's range and whose directions' reciprocals
+    # underflow it, in world space or in the object space of an instance scaled by 1e-100:
+    # the float32 box test made NaN slab distances of them, which entered a row's unused slots
+    # (references to the root) until the traversal's stack overflowed and the process died
+    scene = Scene("float64")
+    triangle = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    mesh = scene.add_mesh(triangle, [[0, 1, 2]])
+    scene.add_mesh(np.add(triangle, [0.0, 0.0, 1.0]), [[0, 1, 2]])
+    scene.add_instance(mesh, np.diag([1e-100, 1e-100, 1e-100, 1.0]))
+    origins = np.array([[1e39, 1e39, -1e39], [3.0, 2.0, -5.0], [0.3, 0.2, -1.0]])
+    directions = np.array([[-1e46, -1e46, 1e46], [-3.0, -2.0, 5.0], [0.0, 0.0, 1.0]])
+    hits = scene.intersect(origins, directions)
+    assert hits.t[2] == 1.0  # an ordinary ray beside them is answered as ever
+    assert scene.occluded(origins, directions)[2]
+    assert scene.count(origins, directions)[2] == 2
+    assert len(scene.intersect_all(origins, directions).t) >= 2
