@@ -25,6 +25,8 @@ runs along the axis from 0 at the base to 1 at the apex.  Base: polar, as the di
 ``u`` and ``v = ρ / r``.
 """
 
+import math
+
 import numpy as np
 
 from raycore._fp import gamma, like
@@ -74,7 +76,11 @@ def pack(base_center, apex, radius):
     apex = as_point(apex, "apex")
     radius = as_radius(radius)
     w, height = as_unit(apex - base, "apex", "must differ from base_center")
-    slope2 = (radius / height) ** 2
+    slope = radius / height
+    slope2 = slope * slope  # not ** 2, which raises OverflowError where this is inf
+    if not slope2 < math.inf:
+        raise ValueError(f"apex lies too near base_center for radius {radius:g}: the slope's "
+                         f"square, (radius / height)^2, overflows float64")
     return param_row(
         base, apex, w, height, radius, radius * radius, slope2, *orthonormal_frame(w)
     )

@@ -100,7 +100,9 @@ def test_bounds_and_pack():
     ("base", "apex", "radius", "name"),
     [((0, 0), (0, 0, 1), 1.0, "base_center"), ((0, 0, 0), (0, np.inf, 1), 1.0, "apex"),
      ((1, 2, 3), (1, 2, 3), 1.0, "apex"), ((0, 0, 0), (0, 0, 1), 0.0, "radius"),
-     ((0, 0, 0), (0, 0, 1), np.nan, "radius")],
+     ((0, 0, 0), (0, 0, 1), np.nan, "radius"),
+     # (radius / height)^2 overflows: it raised OverflowError, a 500 from the service
+     ((0, 0, 0), (0, 0, 1e-300), 1.0, "apex")],
 )
 def test_bad_shape_raises_naming_the_argument(base, apex, radius, name):
     with pytest.raises(ValueError, match=name):
