@@ -25,6 +25,8 @@ class Settings:
         Triangles stored per scene and per uploaded mesh (instances share their mesh's).
     max_render_pixels : int
         width * height of a render.
+    max_hits : int
+        Crossings that one ``query=all`` answer may list (counted first; 413 beyond).
     store_bytes : int
         Memory budget of the scene and mesh store; least recently used entries go first.
     compute_slots : int
@@ -51,6 +53,7 @@ class Settings:
     max_body_bytes: int = 136 * MIB
     max_triangles: int = 4_000_000
     max_render_pixels: int = 4096 * 4096
+    max_hits: int = 2**22
     store_bytes: int = 2048 * MIB
     compute_slots: int = 1
     body_seconds: int = 60

@@ -165,7 +165,7 @@ async def intersect(scene_id: str, request: Request, state: State,
     received = time.perf_counter()
     accept = request.headers.get("accept", "")
     in_url = set(request.query_params) & set(UrlOptions.model_fields)
-    max_rays = state.settings.max_rays
+    max_rays, max_hits = state.settings.max_rays, state.settings.max_hits
 
     def answer():
         sensor = None
@@ -187,8 +187,9 @@ async def intersect(scene_id: str, request: Request, state: State,
         if len(rays[0]) > max_rays:
             raise LimitExceeded(f"{len(rays[0])} rays in one request; the limit is {max_rays}")
         if sensor is not None and sensor.type == "lidar":
-            return lidar_answer(entry.scene, rays, query, sensor.point_cloud, accept)
-        columns = codecs.result_columns(query.query, run_query(entry.scene, rays, query))
+            return lidar_answer(entry.scene, rays, query, sensor.point_cloud, accept, max_hits)
+        columns = codecs.result_columns(query.query,
+                                        run_query(entry.scene, rays, query, max_hits))
         return encode_columns(columns, accept)
 
     content, answer_type = await state.compute(answer)

@@ -1,9 +1,13 @@
 """POST /v1/scenes/{id}/intersect: HTTP answers equal Scene's, in JSON and in .npy."""
 
 import io
+from dataclasses import replace
 
 import numpy as np
 import pytest
+from fastapi.testclient import TestClient
+
+from service.app import create_app
 
 from .data import SETTINGS, rays, scene_in_process
 
@@ -265,3 +269,20 @@ def test_misses_and_empty_batches(client, query):
     table = load_npy(post_npy(client, empty_scene, npy_bytes(np.zeros((0, 6))),
                               f"?query={query}").content)
     assert len(table) == 0
+
+
+def test_all_hits_past_the_limit_are_refused_before_they_are_listed():
+    # ten boxes in a row along z: each ray down the row crosses the scene 20 times; an answer
+    # may list 100 crossings (2M rays through 1,000 quads had taken the service past 8 GB)
+    boxes = [{"type": "box", "lo": [-1, -1, 3 * i], "hi": [1, 1, 3 * i + 1]} for i in range(10)]
+    with TestClient(create_app(replace(SETTINGS, max_hits=100))) as client:
+        scene_id = client.post("/v1/scenes", json={"objects": boxes}).json()["id"]
+        url = f"/v1/scenes/{scene_id}/intersect"
+        answers = {}
+        for count in (5, 6):
+            answers[count] = client.post(url, json={
+                "origins": [[0.1 * i, 0, -5] for i in range(count)],
+                "directions": [[0, 0, 1]] * count, "query": "all"})
+        assert answers[5].status_code == 200 and len(answers[5].json()["t"]) == 100
+        assert answers[6].status_code == 413
+        assert "cross the scene 120 times" in answers[6].json()["detail"]
