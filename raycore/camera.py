@@ -260,7 +260,7 @@ def _plane_rays_kernel(center, right, up, across, rise, unit, constant, points, 
                 constants[row, k] = constant[k]
 
 
-def _real(value, name):
+def real_number(value, name):
     """``value`` if it is one real number (a bool is not), else ``ValueError`` naming
     ``name``: a comparison with None or a string raised TypeError, with an array NumPy's."""
     if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
@@ -269,7 +269,7 @@ def _real(value, name):
 
 
 def _check_fov(fov):
-    if not 0 < _real(fov, "fov") < 180:
+    if not 0 < real_number(fov, "fov") < 180:
         raise ValueError(f"fov must be in (0, 180) degrees, got {fov!r}")
 
 
@@ -358,7 +358,7 @@ def orthographic_rays(position, look_at, up, view_height, width, height, dtype="
 
 def orthographic_camera(position, look_at, up, view_height, width, height):
     """The :class:`Camera` of :func:`orthographic_rays` (see there for the arguments)."""
-    if not (np.isfinite(_real(view_height, "view_height")) and view_height > 0):
+    if not (np.isfinite(real_number(view_height, "view_height")) and view_height > 0):
         raise ValueError(f"view_height must be positive and finite, got {view_height!r}")
     check_size(width, height)
     position, right, true_up, forward = _frame(position, look_at, up)
@@ -407,7 +407,7 @@ def frame_box(lo, hi, width, height, *, fov=45.0, position=None, look_at=None,
         Naming the argument that is out of range or degenerate.
     """
     _check_fov(fov)
-    if not 0 < _real(fill, "fill") <= 1:
+    if not 0 < real_number(fill, "fill") <= 1:
         raise ValueError(f"fill must be in (0, 1], got {fill!r}")
     check_size(width, height)
     # an empty box is as Scene.bounds gives it, inf above -inf: it may be infinite

@@ -21,8 +21,9 @@ from numba import njit, prange, vectorize
 from raycore._fp import like
 from raycore._memory import empty_aligned
 from raycore.bvh.record import tabled_arrays_of
-from raycore.camera import check_size, strata
+from raycore.camera import check_size, real_number, strata
 from raycore.offset import offset_constants, offset_coordinate
+from raycore.primitives._common import as_unit
 from raycore.queries import hit_surface
 from raycore.rays import as_float_array
 from raycore.shading import interpolated_normal
@@ -141,7 +142,7 @@ def _render(scene, band_rays, width, height, shading, weights, smooth, light_dir
     (:class:`_BandMemory`, or None for the whole image at once) holds arrays it may reuse."""
     if shading not in SHADINGS:
         raise ValueError(f"shading must be one of {SHADINGS}, got {shading!r}")
-    if not isinstance(ambient, (int, float, np.integer, np.floating)) or not 0 <= ambient <= 1:
+    if not 0 <= real_number(ambient, "ambient") <= 1:
         raise ValueError(f"ambient must be a number in [0, 1], got {ambient!r}")
     background = as_float_array(background, "background", np.float64, (3,))
     if np.any(background < 0) or np.any(background > 255):
@@ -313,10 +314,7 @@ def _resolve(linear, weights, thresholds, guesses, image):
 
 def _unit_light(light_direction):
     light = as_float_array(light_direction, "light_direction", np.float64, (3,))
-    if not np.any(light):
-        raise ValueError("light_direction must not be zero")
-    light = light / np.max(np.abs(light))  # so that its squares neither overflow nor vanish
-    return light / np.linalg.norm(light)
+    return as_unit(light, "light_direction", "must not be zero")[0]
 
 
 def _color_table(colors, count):
