@@ -12,23 +12,30 @@ import numpy as np
 from numba import get_num_threads, get_thread_id, njit, prange
 
 from raycore._memory import empty_aligned
+from raycore.primitives._common import as_unit
 from raycore.rays import as_float_array, as_real_array, resolve_dtype
 
 
 def _frame(position, look_at, up):
-    """Camera position and its orthonormal (right, true up, forward) axes, each (3,) float64."""
+    """Camera position and its orthonormal (right, true up, forward) axes, each (3,) float64.
+
+    Lengths through :func:`~raycore.primitives._common.as_unit`, whose squares neither
+    overflow nor vanish: with ``np.linalg.norm``, a look_at 1e200 away or an up of 1e300 was
+    refused as parallel, and position and look_at near float64's largest made NaN rays.
+    """
     position = as_float_array(position, "position", np.float64, (3,))
     look_at = as_float_array(look_at, "look_at", np.float64, (3,))
     up = as_float_array(up, "up", np.float64, (3,))
-    forward = look_at - position
-    if not np.any(forward):
-        raise ValueError("look_at must differ from position")
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, up)
-    norm = np.linalg.norm(right)
-    if norm <= 1e-9 * np.linalg.norm(up):
-        raise ValueError("up must not be zero or parallel to the view direction")
-    right /= norm
+    with np.errstate(over="ignore"):
+        forward = look_at - position
+    if not np.all(np.isfinite(forward)):  # both near float64's largest: halved first (exactly)
+        forward = look_at / 2 - position / 2
+    forward = as_unit(forward, "look_at", "must differ from position")[0]
+    up = as_unit(up, "up", "must not be zero")[0]
+    message = "must not be parallel to the view direction"
+    right, norm = as_unit(np.cross(forward, up), "up", message)
+    if norm <= 1e-9:
+        raise ValueError(f"up {message}")
     return position, right, np.cross(right, forward), forward
 
 
@@ -213,6 +220,7 @@ class Camera(NamedTuple):
                 or not 0 <= first < last <= self.height:
             raise ValueError(f"rows must be two integers in [0, {self.height}], got {rows!r}")
         dtype = resolve_dtype(dtype)
+        self._check_reach(dtype)
         strata_rows, columns, _ = strata(samples)
         shape = ((last - first) * self.width * samples, 3)
         if out is None:
@@ -236,6 +244,20 @@ class Camera(NamedTuple):
                                 np.empty((get_num_threads(), 3, self.width), dtype), points,
                                 constants)
         return out
+
+    def _check_reach(self, dtype):
+        """``ValueError`` unless the rays' coordinates fit ``dtype``: the origin (perspective), or
+        the view plane, ``center`` to ``x_scale`` and ``y_scale`` along right and up, within
+        its largest value (an overflow gave rays of inf, which miss everything)."""
+        with np.errstate(over="ignore", invalid="ignore"):  # inf * 0: NaN, refused below
+            reach = np.abs(self.constant) if self.unit else (
+                np.abs(self.center) + self.x_scale * np.abs(self.right)
+                + self.y_scale * np.abs(self.up))
+        largest = np.finfo(dtype).max
+        if not np.all(reach <= largest):
+            names = "position" if self.unit else "position and view_height"
+            raise ValueError(f"{names} put the rays beyond {np.dtype(dtype).name}'s range "
+                             f"({largest:.4g})")
 
 
 @njit(cache=True, parallel=True)

@@ -50,6 +50,37 @@ def test_up_need_not_be_perpendicular():
                                perspective_rays(**VIEW, fov=50.0, width=3, height=3)[1])
 
 
+@pytest.mark.parametrize("view", [
+    {"position": [0.0, 0.0, -5e200], "look_at": [0.0, 0.0, 1e200], "up": [0.0, 1.0, 0.0]},
+    {"position": [0.0, 0.0, -1.7e308], "look_at": [0.0, 0.0, 1.7e308], "up": [0.0, 1.0, 0.0]},
+    {**VIEW, "up": [0.0, 1e300, 0.0]},
+    {**VIEW, "up": [0.0, 1e-300, 0.0]},
+])
+def test_far_look_at_and_huge_or_tiny_up_give_the_unit_view_directions(view):
+    """Squares that overflow or vanish: such cameras were refused as parallel or gave NaN."""
+    _, directions = perspective_rays(**view, fov=50.0, width=3, height=3)
+    np.testing.assert_allclose(directions,
+                               perspective_rays(**VIEW, fov=50.0, width=3, height=3)[1],
+                               rtol=1e-15, atol=1e-15)
+
+
+@pytest.mark.parametrize(("make", "dtype", "name"), [
+    (lambda: perspective_camera([1e39, 0, 0], [0, 0, 0], [0, 1, 0], 45.0, 4, 4), "float32",
+     "position"),
+    (lambda: orthographic_camera([0, 0, 0], [0, 0, 1], [0, 1, 0], 1.7e308, 8, 2), "float64",
+     "view_height"),
+    (lambda: orthographic_camera([0, 3e38, 0], [0, 3e38, 1], [0, 1, 0], 1e38, 4, 4),
+     "float32", "view_height"),
+])
+def test_rays_beyond_the_dtypes_range_are_refused(make, dtype, name):
+    """Rather than made as inf, which miss everything."""
+    camera = make()
+    if dtype == "float32":
+        assert np.all(np.isfinite(camera.rays("float64")))  # they fit float64
+    with pytest.raises(ValueError, match=name):
+        camera.rays(dtype, samples=4)
+
+
 @pytest.mark.parametrize(("change", "name"), [
     ({"look_at": [0.0, 0.0, -5.0]}, "look_at"),
     ({"up": [0.0, 0.0, 2.0]}, "up"),
