@@ -168,9 +168,9 @@ def _columns(horizontal_resolution, columns):
         _check_count(columns, "columns")
         return int(columns)
     if not (isinstance(horizontal_resolution, (int, float, np.number))
-            and 0 < horizontal_resolution <= 360):
-        raise ValueError("horizontal_resolution must be in (0, 360] degrees, got "
-                         f"{horizontal_resolution!r}")
+            and 360 / MAX_BEAMS <= horizontal_resolution <= 360):
+        raise ValueError(f"horizontal_resolution must be in [360 / {MAX_BEAMS}, 360] degrees, "
+                         f"got {horizontal_resolution!r}")
     return max(1, round(360 / horizontal_resolution))
 
 
@@ -184,9 +184,15 @@ def _ranges(min_range, max_range):
     return float(min_range), float(max_range)
 
 
+#: Channels, and columns, at most: a count that NumPy could not have made an array of (a
+#: resolution of 1e-300 degrees asked for 3.6e302 columns) is refused by name.
+MAX_BEAMS = 2**31 - 1
+
+
 def _check_count(value, name):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
+            or not 1 <= value <= MAX_BEAMS:
+        raise ValueError(f"{name} must be an integer in [1, {MAX_BEAMS}], got {value!r}")
 
 
 #: Rays per block of :func:`lidar`'s float64 arithmetic (1.5 MiB of float64 directions)

@@ -134,6 +134,10 @@ def test_lidar_ranges_are_distances_to_a_wall():
     ({"elevations": [0.0], "horizontal_resolution": 0.0}, "horizontal_resolution"),
     ({"elevations": [0.0], "horizontal_resolution": 400.0}, "horizontal_resolution"),
     ({"elevations": [0.0], "columns": 2.5}, "columns"),
+    # counts no array could hold: NumPy's "Maximum allowed size exceeded" before
+    ({"elevations": [0.0], "horizontal_resolution": 1e-300}, "horizontal_resolution"),
+    ({"elevations": [0.0], "columns": 10**20}, "columns"),
+    ({"vertical_fov": [-10.0, 10.0], "channels": 10**20, "columns": 8}, "channels"),
     ({"elevations": [0.0], "columns": 8, "min_range": -1.0}, "min_range"),
     ({"elevations": [0.0], "columns": 8, "min_range": 2.0, "max_range": 2.0}, "max_range"),
     ({"elevations": [0.0], "columns": 8, "max_range": np.nan}, "max_range"),
