@@ -10,6 +10,7 @@ and exit status 1 (2 for the command line's own syntax), never a traceback.
 import argparse
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -20,7 +21,14 @@ TRACEBACK_VARIABLE = "RAYCORE_TRACEBACK"
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse's parser whose errors are one line (argparse prints the usage before them)."""
+    """argparse's parser whose errors are one line (argparse prints the usage before them), and
+    which takes negative numbers in any notation as values (``--look-at -1e3 0 0``): the argparse
+    of Python 3.11.7, 3.12.1 and 3.13.0 takes only -1 and -1.5 so, and -1e3 for an option."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # a minus, then a digit, or a point and a digit
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
 
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")

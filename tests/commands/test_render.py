@@ -90,14 +90,27 @@ def test_scene_json_renders_as_the_service_renders_it(tmp_path):
 @pytest.mark.parametrize("argv, message", [
     (["--fov", "200"], "--fov must be in (0, 180) degrees"),
     (["--position", "1", "2", "3", "--look-at", "1", "2", "3"], "--look-at must differ"),
-    (["--position", "0", "5", "0", "--look-at", "0", "0", "0"], "--up must not be zero or "
-                                                                 "parallel"),
+    (["--position", "0", "5", "0", "--look-at", "0", "0", "0"], "--up must not be parallel"),
+    (["--up", "0", "0", "0"], "--up must not be zero"),
 ])
 def test_bad_camera_options_are_named(tmp_path, capsys, argv, message):
     code, err = refused(["render", mesh_file("suzanne"), "-o", tmp_path / "x.png", *argv],
                         capsys)
     assert code == 1 and message in err and err.count("\n") <= 1
     assert not (tmp_path / "x.png").exists()
+
+
+def test_negative_numbers_in_exponent_form_are_values(tmp_path):
+    """``--position 0 0 -4e0`` is a position, not an option (Python 3.11's argparse read -4e0 as
+    one)."""
+    pictures = []
+    for z in ("-4", "-4e0"):
+        out = tmp_path / f"{z}.png"
+        main(["render", str(mesh_file("suzanne")), "-o", str(out), "--width", "24", "--height",
+              "24", "--position", "0", "0", z, "--look-at", "0", "0", "0"])
+        pictures.append(_picture(out))
+    np.testing.assert_array_equal(*pictures)
+    assert pictures[0].any()
 
 
 def test_bad_scene_json_is_one_line(tmp_path, capsys):
