@@ -94,7 +94,7 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args(argv)
-    entry, _ = build_scene(demo_spec(), lambda mesh: None, 10**8)
+    entry, _ = build_scene(demo_spec(), lambda mesh: None, 10**8, 10**8)
     rows = [measure("demo", entry.scene, entry.colors, DEMO_CAMERA["position"],
                     DEMO_CAMERA["look_at"], args.rounds)]
     bunny = Scene("float32")

@@ -122,7 +122,7 @@ def scene_id(spec):
     return content_id(spec.model_dump_json().encode())
 
 
-def build_scene(spec: SceneSpec, find_mesh, max_triangles):
+def build_scene(spec: SceneSpec, find_mesh, max_triangles, max_planes):
     """Build (the BVHs of) a scene from its spec.
 
     Parameters
@@ -130,7 +130,7 @@ def build_scene(spec: SceneSpec, find_mesh, max_triangles):
     spec : SceneSpec
     find_mesh : callable
         Uploaded mesh id -> MeshEntry, or None when unknown.
-    max_triangles : int
+    max_triangles, max_planes : int
 
     Returns
     -------
@@ -142,9 +142,14 @@ def build_scene(spec: SceneSpec, find_mesh, max_triangles):
     ClientError
         Naming the object whose parameters the library refuses, or the unknown mesh it names.
     LimitExceeded
-        When the scene would store more than ``max_triangles`` triangles.
+        When the scene would store more than ``max_triangles`` triangles, or has more than
+        ``max_planes`` planes.
     """
     start = time.perf_counter()
+    planes = sum(obj.type == "plane" for obj in spec.objects)
+    if planes > max_planes:
+        raise LimitExceeded(f"the scene has {planes} planes; the limit is {max_planes} (every "
+                            "ray tests every plane)")
     for index, obj in enumerate(spec.objects):
         if obj.type == "mesh" and obj.faces is not None and len(obj.faces) > max_triangles:
             # the document's maxItems: invalid, where only the whole scene's count is too large

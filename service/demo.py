@@ -72,7 +72,8 @@ def load_demo(state):
     logged and leaves /readyz at 503.
     """
     try:
-        entry, held = build_scene(demo_spec(), state.store.get, state.settings.max_triangles)
+        entry, held = build_scene(demo_spec(), state.store.get, state.settings.max_triangles,
+                                  state.settings.max_planes)
         state.store.put("scene", entry.info.id, entry, held, pinned=True)
         state.store.alias("scene", "demo", entry.info.id)
         origins, directions = perspective_rays(DEMO_CAMERA["position"], DEMO_CAMERA["look_at"],

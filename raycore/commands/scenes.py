@@ -104,7 +104,7 @@ def _load_json(path, dtype, progress):
                 raise CommandError(f"{where}: {file}: {error}") from error
     with progress.stage("building the scene"):
         try:
-            entry, _ = build_scene(spec, meshes.get, UNLIMITED)
+            entry, _ = build_scene(spec, meshes.get, UNLIMITED, UNLIMITED)
         except ClientError as error:
             raise CommandError(f"{path}: {error}") from error
     return entry.scene, entry.colors

@@ -68,8 +68,8 @@ _BUILD_RULES = (
     "cone axes (apex - base_center) are not zero; a mesh object gives either mesh or both "
     "vertices and faces, and its faces index its vertices; an instance's mesh index names an "
     "earlier mesh object; a float32 scene's numbers fit float32.  A mesh id that names no "
-    "uploaded mesh is answered 404.  The whole scene stores at most the configured number of "
-    "triangles (413).")
+    "uploaded mesh is answered 404.  The whole scene stores at most the configured numbers of "
+    "triangles and of planes (413).")
 
 
 @guarded.post("", status_code=201, response_model=SceneInfo, summary="Build a scene",
@@ -85,7 +85,7 @@ async def create_scene(spec: SceneSpec, response: Response, state: State):
         if existing is not None:
             return existing, False
         entry, held = build_scene(spec, lambda mesh: state.find("mesh", mesh),
-                                  state.settings.max_triangles)
+                                  state.settings.max_triangles, state.settings.max_planes)
         return state.keep("scene", key, entry, held)
 
     entry, created = await state.compute(build)

@@ -155,7 +155,7 @@ def test_a_scenes_charge_covers_what_it_holds(kind):
     gc.collect()
     tracemalloc.start()
     try:
-        entry, _ = build_scene(spec, lambda mesh: None, 10**8)
+        entry, _ = build_scene(spec, lambda mesh: None, 10**8, 10**8)
         gc.collect()
         held, _ = tracemalloc.get_traced_memory()
     finally:
