@@ -21,8 +21,8 @@ announce_compiles()
 
 from raycore import sensors  # noqa: E402
 from raycore._info import info  # noqa: E402
-from raycore.hits import AllHits, Hits  # noqa: E402
+from raycore.hits import AllHits, Hits, TooManyHits  # noqa: E402
 from raycore.offset import offset_ray_origin  # noqa: E402
 from raycore.scene import Scene  # noqa: E402
 
-__all__ = ["AllHits", "Hits", "Scene", "info", "offset_ray_origin", "sensors"]
+__all__ = ["AllHits", "Hits", "Scene", "TooManyHits", "info", "offset_ray_origin", "sensors"]

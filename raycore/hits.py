@@ -105,3 +105,18 @@ class AllHits:
 
     def __len__(self):
         return len(self.t)
+
+
+class TooManyHits(ValueError):
+    """:meth:`raycore.Scene.intersect_all`'s answer would list more than its ``max_hits``
+    crossings: raised once they are counted, before any memory is taken for them.
+
+    Attributes
+    ----------
+    crossings, max_hits : int
+    """
+
+    def __init__(self, crossings, max_hits):
+        super().__init__(f"the rays cross the scene {crossings} times, more than max_hits "
+                         f"({max_hits})")
+        self.crossings, self.max_hits = crossings, max_hits

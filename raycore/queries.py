@@ -33,6 +33,7 @@ from raycore.bvh.traverse import (
     scratch_lengths,
     trace_range,
 )
+from raycore.hits import TooManyHits
 from raycore.primitives.analytic import analytic_surface
 from raycore.primitives.triangle import triangle_normal
 from raycore.ray_order import gather_rays, group_order, ungroup
@@ -425,8 +426,9 @@ def odd_crossings(scene, rays, test, sphere_method):
     return first_bad, odd
 
 
-def all_hits(scene, rays, test, sphere_method):
-    """Every crossing of each ray, sorted by t, one per surface crossing.
+def all_hits(scene, rays, test, sphere_method, max_hits=None):
+    """Every crossing of each ray, sorted by t, one per surface crossing; ``TooManyHits``
+    when there are more than ``max_hits`` (None: no limit), before their arrays are made.
 
     Returns
     -------
@@ -460,6 +462,8 @@ def all_hits(scene, rays, test, sphere_method):
     # where each traced ray's crossings go in the batch's order
     places = offsets[order] if len(order) else offsets[:-1]
     total = int(offsets[-1])
+    if max_hits is not None and total > max_hits:
+        raise TooManyHits(total, max_hits)
     hits = (np.empty(total, rays[0].dtype), np.empty(total, np.int64), np.empty(total, np.int64))
     if _compiled(_move_lists, scene)(listed_at, traced_counts, places, *listed, *hits):
         again = np.flatnonzero(listed_at < 0)

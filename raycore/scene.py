@@ -386,20 +386,30 @@ class Scene:
         return hit
 
     def intersect_all(self, origins, directions, tmin=0.0, tmax=np.inf, *,
-                      triangle_test="watertight", sphere_method="precise"):
+                      triangle_test="watertight", sphere_method="precise", max_hits=None):
         """Every surface crossing along each ray, sorted by (ray, t).
 
         A ray through an edge or vertex shared by several triangles of one mesh crosses the
         surface once and is reported once.
 
+        Parameters
+        ----------
+        max_hits : int, optional
+            Crossings the answer may list at most: more raise :class:`raycore.TooManyHits`
+            (a ``ValueError``) once they are counted, before memory is taken for them.
+
         Returns
         -------
         AllHits
         """
+        if max_hits is not None and (isinstance(max_hits, bool) or not isinstance(
+                max_hits, (int, np.integer)) or max_hits < 0):
+            raise ValueError(f"max_hits must be None or an integer >= 0, got {max_hits!r}")
         test = triangle_test_code(triangle_test)
         method = analytic.sphere_method_code(sphere_method)
         rays = ray_arrays(origins, directions, tmin, tmax, self._kernel_dtype)
-        first_bad, counts, t, obj, prim = queries.all_hits(self._scene(), rays, test, method)
+        first_bad, counts, t, obj, prim = queries.all_hits(self._scene(), rays, test, method,
+                                                           max_hits)
         if first_bad < len(rays[0]):  # the compiled pass refused a ray: say what is wrong
             refuse(origins, directions, tmin, tmax, self.dtype)
         ray_index = np.arange(len(counts), dtype=np.int64).repeat(counts)

@@ -7,6 +7,7 @@ exactly as the service does.  The library's ``ValueError``s become
 
 import numpy as np
 
+from raycore import TooManyHits
 from raycore.render import ARRAY_SHADINGS, render_arrays, render_camera
 from service import codecs
 from service.errors import ClientError, LimitExceeded, NotAcceptable
@@ -23,9 +24,9 @@ def run_query(scene, rays, options, max_hits=None):
         Origins and directions (N, 3), tmin and tmax (scalars or (N,)).
     options : service.schemas.QueryOptions
     max_hits : int, optional
-        Most crossings that ``query=all`` may list: the rays' crossings are counted first
-        (a traversal that lists nothing), so that an answer of gigabytes is refused before it
-        is made (2M rays through 1,000 parallel quads took the service past 8 GB).
+        Most crossings that ``query=all`` may list: ``Scene.intersect_all`` refuses more once
+        it has counted them, before it makes their arrays, so that an answer of gigabytes is
+        never made (2M rays through 1,000 parallel quads took the service past 8 GB).
 
     Returns
     -------
@@ -47,13 +48,11 @@ def run_query(scene, rays, options, max_hits=None):
         if options.query == "any":
             return scene.occluded(*rays, triangle_test=test)
         if options.query == "all":
-            if max_hits is not None:
-                crossings = int(scene.count(*rays, triangle_test=test).sum())
-                if crossings > max_hits:
-                    raise LimitExceeded(f"the rays cross the scene {crossings} times; an answer "
-                                        f"lists at most {max_hits}: send fewer rays")
-            return scene.intersect_all(*rays, triangle_test=test)
+            return scene.intersect_all(*rays, triangle_test=test, max_hits=max_hits)
         return scene.count(*rays, triangle_test=test)
+    except TooManyHits as error:
+        raise LimitExceeded(f"the rays cross the scene {error.crossings} times; an answer "
+                            f"lists at most {max_hits}: send fewer rays") from error
     except ValueError as error:
         raise ClientError(str(error)) from error
 

@@ -1,11 +1,13 @@
 """Scene odds and ends: empty scenes, no rays, changes after a query, result types, bounds."""
 
+import tracemalloc
+
 import numba
 import numpy as np
 import pytest
 from numba import types
 
-from raycore import AllHits, Hits, Scene, queries
+from raycore import AllHits, Hits, Scene, TooManyHits, queries
 from raycore.bvh.traverse import HIT_CAPACITY
 from raycore.queries import LIST_ROOM
 
@@ -120,6 +122,30 @@ def test_a_ray_crossing_more_surfaces_than_a_thread_lists_at_first(dtype):
     close = dict(rel=4 * float(np.finfo(dtype).eps))
     assert all_hits.t[:layers].tolist() == pytest.approx(np.arange(1.0, layers + 1), **close)
     assert all_hits.t[layers:].tolist() == pytest.approx(np.arange(101.0, 201.0), **close)
+
+
+def test_more_crossings_than_max_hits_are_refused_before_they_are_listed(dtype):
+    layers, rays = 100, 20_000
+    scene = stacked_squares(dtype, layers)
+    origins, directions = np.tile([0.3, 0.3, -1.0], (rays, 1)), np.tile([0, 0, 1.0], (rays, 1))
+    crossings = layers * rays
+    assert len(scene.intersect_all(origins[:3], directions[:3], max_hits=3 * layers)) == \
+        3 * layers
+    with pytest.raises(TooManyHits, match=f"{crossings} times, more than max_hits"):
+        scene.intersect_all(origins, directions, max_hits=crossings - 1)  # compiled, if not yet
+    tracemalloc.start()
+    try:
+        with pytest.raises(TooManyHits) as refused:
+            scene.intersect_all(origins, directions, max_hits=crossings - 1)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert (refused.value.crossings, refused.value.max_hits) == (crossings, crossings - 1)
+    # the answer's arrays (t, geom_id, prim_id) would take this much: none of it was taken
+    assert peak < crossings * (np.dtype(dtype).itemsize + 16) / 4, peak
+    for bad in (-1, 1.5, True, "30"):
+        with pytest.raises(ValueError, match="max_hits"):
+            scene.intersect_all(origins, directions, max_hits=bad)
 
 
 def test_rays_listing_more_crossings_than_their_batch_has_room_for(dtype, monkeypatch):
