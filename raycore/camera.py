@@ -13,7 +13,7 @@ from numba import get_num_threads, get_thread_id, njit, prange
 
 from raycore._memory import empty_aligned
 from raycore.primitives._common import as_unit
-from raycore.rays import as_float_array, as_real_array, resolve_dtype
+from raycore.rays import as_float_array, as_real_array, integer, real_number, resolve_dtype
 
 
 def _frame(position, look_at, up):
@@ -282,14 +282,6 @@ def _plane_rays_kernel(center, right, up, across, rise, unit, constant, points, 
                 constants[row, k] = constant[k]
 
 
-def real_number(value, name):
-    """``value`` if it is one real number (a bool is not), else ``ValueError`` naming
-    ``name``: a comparison with None or a string raised TypeError, with an array NumPy's."""
-    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
-        return value
-    raise ValueError(f"{name} must be a real number, got {value!r}")
-
-
 def _check_fov(fov):
     if not 0 < real_number(fov, "fov") < 180:
         raise ValueError(f"fov must be in (0, 180) degrees, got {fov!r}")
@@ -297,10 +289,7 @@ def _check_fov(fov):
 
 def _check_seed(seed):
     """``seed`` as the np.uint64 the jitter takes: an integer in [0, 2^64)."""
-    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) \
-            or not 0 <= seed < 2**64:
-        raise ValueError(f"seed must be an integer in [0, 2^64), got {seed!r}")
-    return np.uint64(seed)
+    return np.uint64(integer(seed, "seed", 0, 2**64 - 1))
 
 
 def perspective_rays(position, look_at, up, fov, width, height, dtype="float64", samples=1,

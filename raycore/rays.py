@@ -10,6 +10,23 @@ from numba import njit, prange
 DTYPES = {"float32": np.float32, "float64": np.float64}
 
 
+def real_number(value, name):
+    """``value`` if it is one real number (a bool is not), else ``ValueError`` naming
+    ``name``: a comparison with None or a string raised TypeError, with an array NumPy's."""
+    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
+        return value
+    raise ValueError(f"{name} must be a real number, got {value!r}")
+
+
+def integer(value, name, low, high):
+    """``value`` if it is an integer (a bool is not) in [low, high], else ``ValueError`` naming
+    ``name``."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool) \
+            and low <= value <= high:
+        return value
+    raise ValueError(f"{name} must be an integer in [{low}, {high}], got {value!r}")
+
+
 def resolve_dtype(dtype):
     """Return ``np.float32`` or ``np.float64`` for a dtype-like, else raise ``ValueError``."""
     if dtype is None:  # which NumPy takes as float64

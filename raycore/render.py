@@ -21,11 +21,11 @@ from numba import njit, prange, vectorize
 from raycore._fp import like
 from raycore._memory import empty_aligned
 from raycore.bvh.record import tabled_arrays_of
-from raycore.camera import check_size, real_number, strata
+from raycore.camera import check_size, strata
 from raycore.offset import offset_constants, offset_coordinate
 from raycore.primitives._common import as_unit
 from raycore.queries import hit_surface
-from raycore.rays import as_float_array
+from raycore.rays import as_float_array, real_number
 from raycore.shading import interpolated_normal
 
 SHADINGS = ("depth", "normal", "lambert", "id")

@@ -23,7 +23,7 @@ from raycore.integrations import open3d as _open3d
 from raycore.mesh import Mesh, affine_inverse, affine_product, validate_transform
 from raycore.primitives import analytic, box, cone, cylinder, disk, plane, sphere
 from raycore.primitives.triangle import WATERTIGHT, triangle_test_code
-from raycore.rays import as_float_array, ray_arrays, refuse, resolve_dtype
+from raycore.rays import as_float_array, integer, ray_arrays, refuse, resolve_dtype
 from raycore.shading import NormalTables, shading_normals
 
 #: Directions for ``contains``: a majority vote over three rays makes the parity test robust to a
@@ -402,9 +402,8 @@ class Scene:
         -------
         AllHits
         """
-        if max_hits is not None and (isinstance(max_hits, bool) or not isinstance(
-                max_hits, (int, np.integer)) or max_hits < 0):
-            raise ValueError(f"max_hits must be None or an integer >= 0, got {max_hits!r}")
+        if max_hits is not None:
+            integer(max_hits, "max_hits", 0, np.inf)
         test = triangle_test_code(triangle_test)
         method = analytic.sphere_method_code(sphere_method)
         rays = ray_arrays(origins, directions, tmin, tmax, self._kernel_dtype)

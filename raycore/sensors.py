@@ -18,7 +18,7 @@ from typing import NamedTuple
 import numpy as np
 
 from raycore.camera import orthographic_rays, perspective_rays
-from raycore.rays import as_float_array, resolve_dtype
+from raycore.rays import as_float_array, integer, resolve_dtype
 
 
 class SensorRays(NamedTuple):
@@ -153,7 +153,7 @@ def _elevations(elevations, vertical_fov, channels):
         lowest, highest = as_float_array(vertical_fov, "vertical_fov", np.float64, (2,))
         if lowest > highest:
             raise ValueError(f"vertical_fov must be (lowest, highest), got {vertical_fov!r}")
-        _check_count(channels, "channels")
+        integer(channels, "channels", 1, MAX_BEAMS)
         elevations = np.linspace(lowest, highest, channels)
     if np.any(np.abs(elevations) > 90):
         name = "elevations" if vertical_fov is None else "vertical_fov"
@@ -165,7 +165,7 @@ def _columns(horizontal_resolution, columns):
     if (horizontal_resolution is None) == (columns is None):
         raise ValueError("give either horizontal_resolution or columns")
     if columns is not None:
-        _check_count(columns, "columns")
+        integer(columns, "columns", 1, MAX_BEAMS)
         return int(columns)
     if not (isinstance(horizontal_resolution, (int, float, np.number))
             and 360 / MAX_BEAMS <= horizontal_resolution <= 360):
@@ -187,12 +187,6 @@ def _ranges(min_range, max_range):
 #: Channels, and columns, at most: a count that NumPy could not have made an array of (a
 #: resolution of 1e-300 degrees asked for 3.6e302 columns) is refused by name.
 MAX_BEAMS = 2**31 - 1
-
-
-def _check_count(value, name):
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
-            or not 1 <= value <= MAX_BEAMS:
-        raise ValueError(f"{name} must be an integer in [1, {MAX_BEAMS}], got {value!r}")
 
 
 #: Rays per block of :func:`lidar`'s float64 arithmetic (1.5 MiB of float64 directions)

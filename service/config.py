@@ -30,7 +30,8 @@ class Settings:
     max_render_pixels : int
         width * height of a render.
     max_hits : int
-        Crossings that one ``query=all`` answer may list (counted first; 413 beyond).
+        Crossings that one ``query=all`` answer may list (413 beyond, refused once they are
+        counted, before they are listed).
     store_bytes : int
         Memory budget of the scene and mesh store; least recently used entries go first.
     compute_slots : int

@@ -38,6 +38,7 @@ from raycore.bvh.split import (
     set_scale,
     store_side,
 )
+from raycore.rays import integer, real_number
 
 #: Deepest tree the build may produce; traversal stacks are sized from it.
 MAX_DEPTH = 64
@@ -82,15 +83,10 @@ class BuildParams:
     def __post_init__(self):
         for name, low, high in (("bins", 2, 256), ("max_leaf_size", 1, 255),
                                  ("block_size", 1, 16)):
-            value = getattr(self, name)
-            if not isinstance(value, (int, np.integer)) or isinstance(value, bool):
-                raise ValueError(f"{name} must be an integer, got {value!r}")
-            if not low <= value <= high:
-                raise ValueError(f"{name} must be between {low} and {high}, got {value}")
+            integer(getattr(self, name), name, low, high)
         for name in ("traversal_cost", "intersection_cost"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float, np.integer, np.floating))
-                    and not isinstance(value, bool) and math.isfinite(value) and value > 0):
+            value = real_number(getattr(self, name), name)
+            if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be positive and finite, got {value!r}")
 
 
