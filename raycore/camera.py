@@ -6,6 +6,7 @@ perpendicular to the view direction, only not parallel to it).  Image x grows to
 the view, image y grows downwards.
 """
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -37,6 +38,17 @@ def _frame(position, look_at, up):
     if norm <= 1e-9:
         raise ValueError(f"up {message}")
     return position, right, np.cross(right, forward), forward
+
+
+def half_tan(fov):
+    """tan(fov / 2) of an angle in degrees, with the same bits on every x86-64 CPU.
+
+    Not ``np.tan``: NumPy's float64 tan runs SVML's loop on CPUs with AVX-512, whose last bit
+    differed from its AVX2 loop's for about one angle in 200 (``tests/scene/test_other_cpu.py``),
+    and a camera's rays with it.  ``math.tan`` is the C library's, one code on every CPU of
+    raycore's levels.
+    """
+    return math.tan(math.radians(fov) / 2)
 
 
 def check_size(width, height):
@@ -332,7 +344,7 @@ def perspective_camera(position, look_at, up, fov, width, height):
     check_size(width, height)
     position, right, true_up, forward = _frame(position, look_at, up)
     # the image plane at distance 1
-    half_height = np.tan(np.radians(fov) / 2)
+    half_height = half_tan(fov)
     return Camera(forward, right, true_up, half_height * width / height, half_height, width,
                   height, position, unit=True)
 
@@ -432,7 +444,7 @@ def frame_box(lo, hi, width, height, *, fov=45.0, position=None, look_at=None,
     look_at = (lo + hi) / 2 if look_at is None else as_float_array(look_at, "look_at",
                                                                    np.float64, (3,))
     # half the image's extent at distance 1, vertically and horizontally, shrunk by fill
-    tan_v = np.tan(np.radians(fov) / 2) * fill
+    tan_v = half_tan(fov) * fill
     tan_h = tan_v * width / height
     if position is None:
         toward = np.asarray(THREE_QUARTER) / np.linalg.norm(THREE_QUARTER)

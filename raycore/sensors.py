@@ -18,6 +18,7 @@ from typing import NamedTuple
 import numpy as np
 
 from raycore.camera import orthographic_rays, perspective_rays
+from raycore.primitives._common import as_unit
 from raycore.rays import as_float_array, integer, resolve_dtype
 
 
@@ -251,23 +252,21 @@ max_range
 
 
 def _sensor_frame(forward, up):
-    """Unit (forward, left, up) axes, forward made perpendicular to up, each (3,) float64."""
+    """Unit (forward, left, up) axes, forward made perpendicular to up, each (3,) float64.
+
+    Lengths through :func:`~raycore.primitives._common.as_unit` and the dot product summed in
+    a fixed order, not through ``np.linalg.norm`` and ``@``, whose BLAS kernels depend on the
+    CPU: the axes, and the scan's rays, have the same bits on every machine.
+    """
     forward = as_float_array(forward, "forward", np.float64, (3,))
     up = as_float_array(up, "up", np.float64, (3,))
-    if not np.any(up):
-        raise ValueError("up must not be zero")
-    if not np.any(forward):
-        raise ValueError("forward must not be zero")
-    # scaled to a largest component of 1 first, so that tiny and huge vectors' squares neither
-    # underflow nor overflow
-    up = up / np.abs(up).max()
-    up /= np.linalg.norm(up)
-    forward = forward / np.abs(forward).max()
-    level = forward - (forward @ up) * up
-    norm = np.linalg.norm(level)
-    if norm <= 1e-9 * np.linalg.norm(forward):
-        raise ValueError("forward must not be parallel to up")
-    level /= norm
+    up = as_unit(up, "up", "must not be zero")[0]
+    forward = as_unit(forward, "forward", "must not be zero")[0]
+    along = (forward[0] * up[0] + forward[1] * up[1]) + forward[2] * up[2]
+    message = "must not be parallel to up"
+    level, norm = as_unit(forward - along * up, "forward", message)
+    if norm <= 1e-9:
+        raise ValueError(f"forward {message}")
     return level, np.cross(up, level), up
 
 

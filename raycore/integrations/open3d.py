@@ -16,6 +16,7 @@ mesh is counted and listed once (Embree may count it once per triangle, or not a
 
 import numpy as np
 
+from raycore.camera import half_tan
 from raycore.rays import as_float_array
 
 #: Open3D's ``RaycastingScene.INVALID_ID``: the id of a miss.
@@ -144,7 +145,7 @@ def _pinhole_look_at(fov_deg, center, eye, up, width_px, height_px):
     rotation = np.array([right, np.cross(forward, right), forward])  # world -> camera rows
     extrinsic = np.eye(4)
     extrinsic[:3, :3], extrinsic[:3, 3] = rotation, -rotation @ eye
-    focal = 0.5 * width_px / np.tan(np.radians(fov_deg) / 2)
+    focal = 0.5 * width_px / half_tan(fov_deg)
     intrinsic = [[focal, 0, width_px / 2], [0, focal, height_px / 2], [0, 0, 1]]
     return _pinhole(intrinsic, extrinsic, width_px, height_px)
 

@@ -7,7 +7,8 @@ feature off (into an empty cache, so they are compiled for that target), and Num
 without AVX-512.  It runs the brute-force comparison on the instances and transformed boxes of
 the seed-1 scene, where a fresh clone failed on the AVX2 machine (ray 583, float64: a 1e-14
 difference in t), and its answers there and on the whole scene (every kind of object) must equal
-this process's bit for bit.
+this process's bit for bit, as must the rays the library makes for cameras and LiDAR scans
+(:func:`sensor_rays`: a camera's rays differed for one field of view in 200).
 
 The child compiles its kernels from scratch: about a minute on an idle 2-core machine (up to 4
 under load); the queries themselves take a few seconds.
@@ -21,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from raycore import camera, sensors
 
 from .brute import SceneSpec, compare_all, compare_closest, random_scene, scene_rays
 
@@ -68,7 +71,32 @@ def answers(dtype, path):
             assert excused <= 0.02 * len(origins)
     # the data: hits on instances and on boxes
     assert np.sum(ref.instance) > 500 and np.sum(~ref.instance) > 50
+    saved.update(sensor_rays())
     np.savez(path, **saved)
+
+
+def sensor_rays():
+    """Rays that the library makes from a few numbers: cameras of many fields of view (NumPy's
+    float64 ``tan`` runs SVML's loop on AVX-512 CPUs, which differed from the AVX2 loop in the
+    last bit for about one angle in 200), the cameras that frame a box, and LiDAR scans from
+    tilted poses."""
+    saved = {}
+    fovs = np.linspace(1.0, 179.0, 397)
+    cameras = [camera.perspective_camera((0.3, -1.7, 4.1), (0.2, 0.5, -0.9), (0.1, 1.0, 0.2), fov,
+                                         16, 9) for fov in fovs]
+    saved["camera_scales"] = np.array([(c.x_scale, c.y_scale) for c in cameras])
+    saved["camera_axes"] = np.array([(c.center, c.right, c.up) for c in cameras])
+    # 253: one whose scales NumPy's two loops made differently
+    saved["camera_rays"] = np.stack(cameras[253].rays("float64", samples=4, seed=7))
+    framed = [camera.frame_box((-1.3, 0.2, -0.7), (2.9, 1.1, 0.4), 64, 48, fov=fov)
+              for fov in fovs[::8]]
+    saved["framed_positions"] = np.array([position for position, _, _ in framed])
+    saved["framed_heights"] = np.array([height for _, _, height in framed])
+    for k, (forward, up) in enumerate([((1.0, 0.3, -0.2), (0.1, -0.2, 1.0)),
+                                       ((-0.4, 2.0, 0.7), (0.3, 0.9, -0.1))]):
+        scan = sensors.lidar((0.5, -2.0, 1.2), forward, up, preset="velodyne-vlp16", columns=720)
+        saved[f"lidar_{k}"] = scan.directions
+    return saved
 
 
 def avx2_environment(cache):
