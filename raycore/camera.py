@@ -33,10 +33,8 @@ def _frame(position, look_at, up):
         forward = look_at / 2 - position / 2
     forward = as_unit(forward, "look_at", "must differ from position")[0]
     up = as_unit(up, "up", "must not be zero")[0]
-    message = "must not be parallel to the view direction"
-    right, norm = as_unit(np.cross(forward, up), "up", message)
-    if norm <= 1e-9:
-        raise ValueError(f"up {message}")
+    right = as_unit(np.cross(forward, up), "up", "must not be parallel to the view direction",
+                    shortest=1e-9)[0]
     return position, right, np.cross(right, forward), forward
 
 

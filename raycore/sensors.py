@@ -263,10 +263,8 @@ def _sensor_frame(forward, up):
     up = as_unit(up, "up", "must not be zero")[0]
     forward = as_unit(forward, "forward", "must not be zero")[0]
     along = (forward[0] * up[0] + forward[1] * up[1]) + forward[2] * up[2]
-    message = "must not be parallel to up"
-    level, norm = as_unit(forward - along * up, "forward", message)
-    if norm <= 1e-9:
-        raise ValueError(f"forward {message}")
+    level = as_unit(forward - along * up, "forward", "must not be parallel to up",
+                    shortest=1e-9)[0]
     return level, np.cross(up, level), up
 
 

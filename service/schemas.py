@@ -321,8 +321,9 @@ class PointRays(Strict):
 
     type: Literal["points"]
     sources: Annotated[list[Vec3], Field(min_length=1), FAIL_FAST]
-    targets: Annotated[list[Vec3], FAIL_FAST, Field(min_length=1, description=(
-        "As many as sources, or either holds one point; each differs from its source"))]
+    targets: Annotated[list[Vec3], Field(min_length=1, description=(
+        "As many as sources, or either holds one point; each differs from its source")),
+        FAIL_FAST]
 
 
 SensorSpec = Annotated[PerspectiveRays | OrthographicRays | LidarRays | PointRays,

@@ -42,8 +42,10 @@ def as_radius(value, name="radius"):
     return radius
 
 
-def as_unit(vector, name, message="must be non-zero"):
-    """Return ``vector / |vector|`` and its length; raise ``ValueError`` naming ``name`` if zero."""
+def as_unit(vector, name, message="must be non-zero", shortest=0.0):
+    """Return ``vector / |vector|`` and its length; raise ``ValueError`` naming ``name`` unless
+    the length is finite and above ``shortest`` (a cross product or a projection of unit
+    vectors that short leaves no direction to speak of)."""
     # not np.linalg.norm: its dot product runs an OpenBLAS kernel whose last bit depends on the CPU
     x, y, z = np.asarray(vector, np.float64).tolist()
     length = math.sqrt((x * x + y * y) + z * z)
@@ -53,7 +55,7 @@ def as_unit(vector, name, message="must be non-zero"):
         # first (only then, so that every other vector keeps the bits it had)
         x, y, z = x / largest, y / largest, z / largest
         length = largest * math.sqrt((x * x + y * y) + z * z)
-    if not (length > 0 and math.isfinite(length)):
+    if not (length > shortest and math.isfinite(length)):
         raise ValueError(f"{name} {message}")
     return vector / length, length
 
