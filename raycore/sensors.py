@@ -19,7 +19,7 @@ import numpy as np
 
 from raycore.camera import orthographic_rays, perspective_rays
 from raycore.primitives._common import as_unit
-from raycore.rays import as_float_array, integer, resolve_dtype
+from raycore.rays import as_float_array, integer, real_number, resolve_dtype
 
 
 class SensorRays(NamedTuple):
@@ -168,16 +168,15 @@ def _columns(horizontal_resolution, columns):
     if columns is not None:
         integer(columns, "columns", 1, MAX_BEAMS)
         return int(columns)
-    if not (isinstance(horizontal_resolution, (int, float, np.number))
-            and 360 / MAX_BEAMS <= horizontal_resolution <= 360):
+    if not 360 / MAX_BEAMS <= real_number(horizontal_resolution, "horizontal_resolution") <= 360:
         raise ValueError(f"horizontal_resolution must be in [360 / {MAX_BEAMS}, 360] degrees, "
                          f"got {horizontal_resolution!r}")
     return max(1, round(360 / horizontal_resolution))
 
 
 def _ranges(min_range, max_range):
-    min_range = 0.0 if min_range is None else min_range
-    max_range = np.inf if max_range is None else max_range
+    min_range = 0.0 if min_range is None else real_number(min_range, "min_range")
+    max_range = np.inf if max_range is None else real_number(max_range, "max_range")
     if not (np.isfinite(min_range) and min_range >= 0):
         raise ValueError(f"min_range must be finite and >= 0, got {min_range!r}")
     if not max_range > min_range:  # also refuses NaN

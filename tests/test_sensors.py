@@ -133,6 +133,10 @@ def test_lidar_ranges_are_distances_to_a_wall():
      "horizontal_resolution or columns"),
     ({"elevations": [0.0], "horizontal_resolution": 0.0}, "horizontal_resolution"),
     ({"elevations": [0.0], "horizontal_resolution": 400.0}, "horizontal_resolution"),
+    # not real numbers: a bool was taken as 1 degree, a complex one raised TypeError
+    ({"elevations": [0.0], "horizontal_resolution": True}, "horizontal_resolution"),
+    ({"elevations": [0.0], "horizontal_resolution": 1 + 0j}, "horizontal_resolution"),
+    ({"elevations": [0.0], "horizontal_resolution": "1"}, "horizontal_resolution"),
     ({"elevations": [0.0], "columns": 2.5}, "columns"),
     # counts no array could hold: NumPy's "Maximum allowed size exceeded" before
     ({"elevations": [0.0], "horizontal_resolution": 1e-300}, "horizontal_resolution"),
@@ -141,6 +145,9 @@ def test_lidar_ranges_are_distances_to_a_wall():
     ({"elevations": [0.0], "columns": 8, "min_range": -1.0}, "min_range"),
     ({"elevations": [0.0], "columns": 8, "min_range": 2.0, "max_range": 2.0}, "max_range"),
     ({"elevations": [0.0], "columns": 8, "max_range": np.nan}, "max_range"),
+    ({"elevations": [0.0], "columns": 8, "min_range": True}, "min_range"),
+    ({"elevations": [0.0], "columns": 8, "min_range": "0"}, "min_range"),
+    ({"elevations": [0.0], "columns": 8, "max_range": 5j}, "max_range"),
     ({"preset": "velodyne-vlp1", "columns": 8}, "preset"),
     ({"elevations": [0.0], "columns": 8, "forward": [0, 0, 2]}, "forward"),
     ({"elevations": [0.0], "columns": 8, "forward": [0, 0, 0]}, "forward"),
