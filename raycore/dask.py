@@ -30,6 +30,7 @@ import dask.array as da
 import numpy as np
 
 from raycore.hits import check_fields
+from raycore.rays import integer
 
 __all__ = ["intersect", "occluded", "count", "intersect_all"]
 
@@ -151,8 +152,15 @@ def count(scene, origins, directions, tmin=0.0, tmax=np.inf, *, triangle_test="w
 
 
 def intersect_all(scene, origins, directions, tmin=0.0, tmax=np.inf, *,
-                  triangle_test="watertight", sphere_method="precise"):
+                  triangle_test="watertight", sphere_method="precise", max_hits=None):
     """Every crossing along each ray, as :meth:`raycore.Scene.intersect_all`.
+
+    Parameters
+    ----------
+    max_hits : int, optional
+        Crossings one chunk's answer may list at most, which bounds a worker's memory: a chunk
+        with more raises :class:`raycore.TooManyHits` when it is computed, before memory is
+        taken for its crossings.  Other parameters as :func:`intersect`.
 
     Returns
     -------
@@ -160,7 +168,10 @@ def intersect_all(scene, origins, directions, tmin=0.0, tmax=np.inf, *,
         ``ray_index``, ``t``, ``geom_id``, ``prim_id``: (H,) with chunks of unknown length,
         sorted by (ray, t) as the Scene's; ``counts``: (N,) int64 crossings of each ray.
     """
-    options = {"triangle_test": triangle_test, "sphere_method": sphere_method}
+    if max_hits is not None:  # refused now, not when a worker computes the first chunk
+        integer(max_hits, "max_hits", 0, np.inf)
+    options = {"triangle_test": triangle_test, "sphere_method": sphere_method,
+               "max_hits": max_hits}
     parts = _run(_chunk_all, scene, origins, directions, tmin, tmax, options)
     real = np.dtype(scene.dtype)
     return _fields(parts, {"ray_index": (np.int64, (), False), "t": (real, (), False),

@@ -120,3 +120,8 @@ class TooManyHits(ValueError):
         super().__init__(f"the rays cross the scene {crossings} times, more than max_hits "
                          f"({max_hits})")
         self.crossings, self.max_hits = crossings, max_hits
+
+    def __reduce__(self):
+        # an exception pickles as its class called with self.args (the message alone): one
+        # raised in a Dask worker or a child process could not be rebuilt where it is reported
+        return type(self), (self.crossings, self.max_hits)

@@ -8,7 +8,7 @@ import pytest
 from distributed import Client, LocalCluster, get_task_stream
 
 import raycore.dask
-from raycore import Scene
+from raycore import Scene, TooManyHits
 
 from .conftest import load, random_rays
 
@@ -92,3 +92,30 @@ def test_bad_rays_name_the_argument(scene_and_rays):
         raycore.dask.count(scene, chunked(origins), chunked(directions), tmax=np.ones(3))
     with pytest.raises(ValueError, match="fields"):
         raycore.dask.intersect(scene, chunked(origins), chunked(directions), fields=("colour",))
+
+
+def test_max_hits_bounds_each_chunk_and_its_error_reaches_the_client(client, scene_and_rays):
+    scene, origins, directions, tmax = scene_and_rays
+    o, d = chunked(origins), chunked(directions)
+    counts = scene.count(origins, directions, tmax=tmax)
+    per_chunk = [int(counts[i:i + 1700].sum()) for i in range(0, len(counts), 1700)]
+    enough = raycore.dask.intersect_all(scene, o, d, tmax=chunked(tmax), max_hits=max(per_chunk))
+    got = dask.compute(enough, scheduler=client.get)[0]
+    np.testing.assert_array_equal(got["t"], scene.intersect_all(origins, directions,
+                                                                tmax=tmax).t)
+    # one crossing fewer than the fullest chunk's: that chunk's worker refuses it, and the
+    # client gets the library's error (it pickles with its numbers)
+    short = raycore.dask.intersect_all(scene, o, d, tmax=chunked(tmax),
+                                       max_hits=max(per_chunk) - 1)
+    with pytest.raises(TooManyHits) as refused:
+        dask.compute(short, scheduler=client.get)
+    assert (refused.value.crossings, refused.value.max_hits) == (max(per_chunk),
+                                                                  max(per_chunk) - 1)
+
+
+@pytest.mark.parametrize("max_hits", [-1, 2.5, True])
+def test_a_bad_max_hits_is_refused_before_any_task_runs(max_hits):
+    scene = Scene()
+    scene.add_sphere([0, 0, 0], 1)
+    with pytest.raises(ValueError, match="max_hits"):
+        raycore.dask.intersect_all(scene, np.zeros((4, 3)), np.ones((4, 3)), max_hits=max_hits)

@@ -1,5 +1,6 @@
 """Scene odds and ends: empty scenes, no rays, changes after a query, result types, bounds."""
 
+import pickle
 import tracemalloc
 
 import numba
@@ -141,6 +142,10 @@ def test_more_crossings_than_max_hits_are_refused_before_they_are_listed(dtype):
     finally:
         tracemalloc.stop()
     assert (refused.value.crossings, refused.value.max_hits) == (crossings, crossings - 1)
+    # as a Dask worker or a child process sends it back
+    returned = pickle.loads(pickle.dumps(refused.value))
+    assert (type(returned), str(returned)) == (TooManyHits, str(refused.value))
+    assert (returned.crossings, returned.max_hits) == (crossings, crossings - 1)
     # the answer's arrays (t, geom_id, prim_id) would take this much: none of it was taken
     assert peak < crossings * (np.dtype(dtype).itemsize + 16) / 4, peak
     for bad in (-1, 1.5, True, "30"):
