@@ -204,6 +204,8 @@ def read(source, *, mmap=False):
         # open() would take an integer as a file descriptor, and close it
         raise ValueError(f"path must be a file path (str or os.PathLike) or the file's bytes, "
                          f"got {type(source).__name__}")
+    if not isinstance(mmap, (bool, np.bool_)):  # `elif mmap` of an array raised NumPy's error
+        raise ValueError(f"mmap must be True or False, got {mmap!r}")
     if isinstance(source, (bytes, bytearray, memoryview)):
         raw = empty_on_line(len(source), np.uint8)  # aligned and writable
         raw[:] = np.frombuffer(source, np.uint8)

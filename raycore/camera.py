@@ -49,11 +49,16 @@ def half_tan(fov):
     return math.tan(math.radians(fov) / 2)
 
 
+#: Pixels of an image side at most: a side that NumPy could not have made an axis of (width
+#: 1e30 raised its "Maximum allowed dimension exceeded") is refused by name.
+MAX_SIDE = 2**31 - 1
+
+
 def check_size(width, height):
-    """``ValueError`` naming ``width`` or ``height`` unless both are positive integers."""
-    for name, value in (("width", width), ("height", height)):
-        if not isinstance(value, (int, np.integer)) or value < 1:
-            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    """``ValueError`` naming ``width`` or ``height`` unless both are integers in [1,
+    MAX_SIDE]."""
+    integer(width, "width", 1, MAX_SIDE)
+    integer(height, "height", 1, MAX_SIDE)
 
 
 def _pixel_grid(width, height):
@@ -82,8 +87,7 @@ def strata(samples):
     weights : ndarray of float64, shape (samples,)
         Each sample's stratum's area: the weights of an unbiased pixel mean.
     """
-    if not isinstance(samples, (int, np.integer)) or not 1 <= samples <= MAX_SAMPLES:
-        raise ValueError(f"samples must be an integer in [1, {MAX_SAMPLES}], got {samples!r}")
+    integer(samples, "samples", 1, MAX_SAMPLES)
     columns = int(np.ceil(np.sqrt(samples)))
     rows = -(-samples // columns)
     last = samples - columns * (rows - 1)
@@ -225,10 +229,14 @@ class Camera(NamedTuple):
             Pixel by pixel in scanline order, a pixel's samples together.
         """
         seed = _check_seed(seed)
-        first, last = (0, self.height) if rows is None else rows
-        if not all(isinstance(row, (int, np.integer)) for row in (first, last)) \
-                or not 0 <= first < last <= self.height:
-            raise ValueError(f"rows must be two integers in [0, {self.height}], got {rows!r}")
+        band = (0, self.height) if rows is None else rows
+        # checked before it is unpacked (a number raised TypeError), a bool is not a row
+        if not (isinstance(band, (tuple, list)) and len(band) == 2
+                and all(isinstance(row, (int, np.integer)) and not isinstance(row, bool)
+                        for row in band) and 0 <= band[0] < band[1] <= self.height):
+            raise ValueError(f"rows must be two integers in [0, {self.height}], first < last, "
+                             f"got {rows!r}")
+        first, last = band
         dtype = resolve_dtype(dtype)
         self._check_reach(dtype)
         strata_rows, columns, _ = strata(samples)

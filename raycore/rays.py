@@ -11,10 +11,14 @@ DTYPES = {"float32": np.float32, "float64": np.float64}
 
 
 def real_number(value, name):
-    """``value`` if it is one real number (a bool is not), else ``ValueError`` naming
-    ``name``: a comparison with None or a string raised TypeError, with an array NumPy's."""
+    """``value`` as a float if it is one real number (a bool is not), else ``ValueError``
+    naming ``name``: a comparison with None or a string raised TypeError, with an array NumPy's,
+    and ``np.isfinite`` of an int past int64's range TypeError."""
     if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
-        return value
+        try:
+            return float(value)
+        except OverflowError:  # an int past float64's range
+            pass
     raise ValueError(f"{name} must be a real number, got {value!r}")
 
 

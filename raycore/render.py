@@ -21,11 +21,11 @@ from numba import njit, prange, vectorize
 from raycore._fp import like
 from raycore._memory import empty_aligned
 from raycore.bvh.record import tabled_arrays_of
-from raycore.camera import check_size, strata
+from raycore.camera import Camera, check_size, strata
 from raycore.offset import offset_constants, offset_coordinate
 from raycore.primitives._common import as_unit
 from raycore.queries import hit_surface
-from raycore.rays import as_float_array, real_number
+from raycore.rays import as_float_array, as_real_array, real_number
 from raycore.shading import interpolated_normal
 
 SHADINGS = ("depth", "normal", "lambert", "id")
@@ -80,13 +80,11 @@ def render(scene, origins, directions, width, height, shading="lambert", *, samp
     """
     check_size(width, height)
     _, _, weights = strata(samples)
-    # in the scene's precision, which the shadow rays start from
-    origins = np.asarray(origins, dtype=scene.dtype)
-    directions = np.asarray(directions, dtype=scene.dtype)
     rays = width * height * samples
-    if origins.shape != (rays, 3):
-        raise ValueError(f"origins must have shape ({rays}, 3) for a {width}x{height} image of "
-                         f"{samples} samples a pixel, got {origins.shape}")
+    image = f"a {width}x{height} image of {samples} samples a pixel"
+    # in the scene's precision, which the shadow rays start from
+    origins, directions = (_pixel_rays(value, name, rays, scene.dtype, image)
+                           for name, value in (("origins", origins), ("directions", directions)))
     row = width * samples
     return _render(scene, lambda first, last, memory=None: (origins[first * row:last * row],
                                                             directions[first * row:last * row]),
@@ -116,6 +114,9 @@ def render_camera(scene, camera, shading="lambert", *, samples=1, seed=0, **opti
     ndarray of uint8, shape (camera.height, camera.width, 3)
         The image :func:`render` makes of ``camera.rays(scene.dtype, samples, seed)``.
     """
+    if not isinstance(camera, Camera):
+        raise ValueError(f"camera must be a raycore.camera.Camera (perspective_camera or "
+                         f"orthographic_camera), got {type(camera).__name__}")
     _, _, weights = strata(samples)
     options = {**_RENDER_DEFAULTS, **options}
 
@@ -134,14 +135,29 @@ _RENDER_DEFAULTS = {name: parameter.default
                     if parameter.kind is parameter.KEYWORD_ONLY and name != "samples"}
 
 
+def _pixel_rays(value, name, rays, dtype, image):
+    """``value`` (origins or directions, ``name``) as a (rays, 3) array of ``dtype``;
+    ``ValueError`` naming it, for ``image`` (what the rays are for), otherwise."""
+    array = as_real_array(value, name, dtype)
+    if array.shape != (rays, 3):
+        raise ValueError(f"{name} must have shape ({rays}, 3) for {image}, got {array.shape}")
+    return array
+
+
+def _check_shading(shading, allowed, context=""):
+    """``ValueError`` unless ``shading`` is one of the names ``allowed`` (``context`` ends the
+    message)."""
+    if not (isinstance(shading, str) and shading in allowed):  # `in` of an array is ambiguous
+        raise ValueError(f"shading must be one of {allowed}{context}, got {shading!r}")
+
+
 def _render(scene, band_rays, width, height, shading, weights, smooth, light_direction,
             colors, background, ambient, triangle_test):
     """:func:`render` of the rays that ``band_rays(first_row, last_row, memory)`` gives, as
     ``(origins, directions)`` in the scene's precision, for image rows ``first_row`` to
     ``last_row - 1``; a pixel's ``len(weights)`` samples together.  ``memory``
     (:class:`_BandMemory`, or None for the whole image at once) holds arrays it may reuse."""
-    if shading not in SHADINGS:
-        raise ValueError(f"shading must be one of {SHADINGS}, got {shading!r}")
+    _check_shading(shading, SHADINGS)
     if not 0 <= real_number(ambient, "ambient") <= 1:
         raise ValueError(f"ambient must be a number in [0, 1], got {ambient!r}")
     background = as_float_array(background, "background", np.float64, (3,))
@@ -206,8 +222,7 @@ def render_arrays(scene, origins, directions, width, height, shading, *, smooth=
         ``normal``: (height, width, 3) unit normals as intersect gives them (not turned to the
         camera), NaN for misses; ``id``: (height, width) int32 geometry ids, -1 for misses.
     """
-    if shading not in ARRAY_SHADINGS:
-        raise ValueError(f"shading must be one of {ARRAY_SHADINGS} for arrays, got {shading!r}")
+    _check_shading(shading, ARRAY_SHADINGS, " for arrays")
     check_size(width, height)
     if np.shape(origins) != (width * height, 3):
         raise ValueError(f"origins must have shape ({width * height}, 3) for a {width}x{height} "

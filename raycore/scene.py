@@ -120,6 +120,9 @@ class Scene:
         visible : bool
             False makes the mesh a prototype that only appears through :meth:`add_instance`.
         """
+        if not isinstance(visible, (bool, np.bool_)):  # bool() took any object, and an array
+            # raised NumPy's "truth value is ambiguous"
+            raise ValueError(f"visible must be True or False, got {visible!r}")
         mesh = Mesh(vertices, faces)
         self._fits(mesh.vertices, "vertices")
         self._meshes.append(mesh)
@@ -132,8 +135,8 @@ class Scene:
         ``geom_id`` may itself be an instance: the copy is then placed at ``transform`` applied
         after that instance's own transform.
         """
-        if not (isinstance(geom_id, (int, np.integer)) and 0 <= geom_id < len(self._kind)
-                and self._kind[geom_id] == MESH):
+        if not (isinstance(geom_id, (int, np.integer)) and not isinstance(geom_id, bool)
+                and 0 <= geom_id < len(self._kind) and self._kind[geom_id] == MESH):
             raise ValueError(f"geom_id must be the id of a mesh in this scene, got {geom_id!r}")
         matrix = validate_transform(transform)
         if geom_id in self._placement:
@@ -311,7 +314,7 @@ class Scene:
         -------
         Hits
         """
-        fields = check_fields(fields) if fields else ()
+        fields = check_fields(fields)
         rays, t, obj, prim, surface = self._closest_hits(
             origins, directions, tmin, tmax, triangle_test, sphere_method, bool(fields))
         if not fields:

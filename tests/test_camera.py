@@ -96,13 +96,21 @@ def test_rays_beyond_the_dtypes_range_are_refused(make, dtype, name):
     ({"samples": 4, "seed": 2**64}, "seed"),
     ({"seed": None}, "seed"),
     ({"samples": 4, "seed": 1.5}, "seed"),
+    # a bool is not a size or a count; NumPy raised TypeError for samples=True
+    ({"width": True}, "width"),
+    ({"samples": True}, "samples"),
+    # a side no array could have: NumPy's "Maximum allowed dimension exceeded" before
+    ({"width": 10**30}, "width"),
+    ({"height": 2**31}, "height"),
 ])
 def test_bad_perspective_arguments_name_themselves(change, name):
     with pytest.raises(ValueError, match=name):
         perspective_rays(**{**VIEW, "fov": 45.0, "width": 4, "height": 4, **change})
 
 
-@pytest.mark.parametrize("view_height", [0.0, -1.0, np.inf, None, "2"])
+# 10**400: an int past float64's range (np.isfinite refused ints past int64 with TypeError)
+@pytest.mark.parametrize("view_height", [0.0, -1.0, np.inf, None, "2",
+                                         pytest.param(10**400, id="int-past-float64")])
 def test_bad_view_height(view_height):
     with pytest.raises(ValueError, match="view_height"):
         orthographic_rays(**VIEW, view_height=view_height, width=4, height=4)
@@ -170,7 +178,9 @@ def test_bad_output_arrays(out):
         perspective_camera(**VIEW, fov=50.0, width=7, height=5).rays("float64", out=out)
 
 
-@pytest.mark.parametrize("rows", [(0, 0), (-1, 2), (3, 2), (0, 6), (0.5, 2)])
+# 3 and None: not a pair, which was unpacked before it was checked (TypeError)
+@pytest.mark.parametrize("rows", [(0, 0), (-1, 2), (3, 2), (0, 6), (0.5, 2), (False, 2), 3,
+                                  (1, 2, 3), "ab"])
 def test_bad_band_of_rows(rows):
     with pytest.raises(ValueError, match="rows"):
         perspective_camera(**VIEW, fov=50.0, width=4, height=5).rays(rows=rows)

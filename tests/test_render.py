@@ -125,11 +125,32 @@ def test_id_shading_tells_geometries_apart_and_shows_background():
     ({"colors": [[0.5, np.nan, 0.5]]}, "colors"),
     ({"colors": [[0.5, 2.0, 0.5]]}, "colors"),
     ({"light_direction": [1, np.inf, 0]}, "light_direction"),
+    # each was another exception, or a ValueError naming something else
+    ({"width": True}, "width"),
+    ({"samples": True}, "samples"),
+    ({"shading": np.array(["depth", "id"])}, "shading"),
+    ({"origins": "x"}, "origins"),
+    ({"directions": 1.0}, "directions"),
+    ({"directions": np.ones((5, 3))}, "directions"),
+    ({"directions": {"a": 1}}, "directions"),
 ])
 def test_bad_arguments_name_themselves(change, name):
-    args = {"width": SIZE, "height": SIZE, "shading": "lambert", **change}
+    origins, directions = _front_view()
+    args = {"origins": origins, "directions": directions, "width": SIZE, "height": SIZE,
+            "shading": "lambert", **change}
     with pytest.raises(ValueError, match=name):
-        render(_sphere_scene(), *_front_view(), **args)
+        render(_sphere_scene(), **args)
+
+
+@pytest.mark.parametrize("camera", [None, "perspective", _front_view])
+def test_render_camera_refuses_what_is_not_a_camera(camera):
+    with pytest.raises(ValueError, match="camera must be a raycore.camera.Camera"):
+        render_camera(_sphere_scene(), camera)
+
+
+def test_render_arrays_refuses_a_shading_that_is_not_a_name():
+    with pytest.raises(ValueError, match="shading"):
+        render_arrays(_sphere_scene(), *_front_view(), SIZE, SIZE, np.array(["depth", "id"]))
 
 
 def test_a_light_direction_of_any_finite_size_shades_alike():

@@ -159,6 +159,14 @@ def test_bad_lidar_arguments_are_named(arguments, name):
         sensors.lidar([0, 0, 0], **arguments)
 
 
+def test_ranges_may_be_any_real_number_a_float_holds():
+    # Python ints past int64 (np.isfinite raised TypeError on them) and NumPy scalars
+    rays = sensors.lidar([0, 0, 0], elevations=[0.0], columns=8, min_range=10**20,
+                         max_range=np.float32(2e20))
+    assert (rays.tmin, rays.tmax) == (1e20, float(np.float32(2e20)))
+    assert type(rays.tmin) is type(rays.tmax) is float
+
+
 def test_points_rays_reach_their_targets_at_t_one():
     scene = Scene(dtype="float64")
     scene.add_sphere([0.0, 0.0, 5.0], 1.0)

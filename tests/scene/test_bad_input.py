@@ -116,7 +116,9 @@ def test_rays_in_any_layout_answer_like_contiguous_ones(dtype, layout, count):
         np.testing.assert_array_equal(got, want, err_msg=query)
 
 
-@pytest.mark.parametrize("fields", [("colour",), ("uv", "depth"), "normals", (1,)])
+# an array of numbers: its truth value was asked first, which NumPy refuses unnamed
+@pytest.mark.parametrize("fields", [("colour",), ("uv", "depth"), "normals", (1,),
+                                    np.zeros((2, 2))])
 def test_unknown_fields_raise(dtype, fields):
     with pytest.raises(ValueError, match="fields"):
         small_scene(dtype).intersect(O, D, fields=fields)
@@ -156,6 +158,16 @@ def test_bad_meshes_raise_value_errors_naming_the_argument(dtype, case):
     assert len(scene) == 0  # nothing half-added
 
 
+# bool() took any of these: "no" made a visible mesh, an array raised NumPy's error
+@pytest.mark.parametrize("visible", ["no", None, 1, np.array([True, False])])
+def test_visible_must_be_a_bool(visible):
+    scene = Scene()
+    with pytest.raises(ValueError, match="visible must be True or False"):
+        scene.add_mesh(TRIANGLE, [[0, 1, 2]], visible=visible)
+    assert len(scene) == 0
+    scene.add_mesh(TRIANGLE, [[0, 1, 2]], visible=np.bool_(False))  # NumPy's bool is one
+
+
 def _translation(x, y, z):
     m = np.eye(4)
     m[:3, 3] = [x, y, z]
@@ -169,6 +181,7 @@ BAD_INSTANCES = {
     "geom_id-float": ("geom_id", 1.0, np.eye(4)),
     "geom_id-string": ("geom_id", "1", np.eye(4)),
     "geom_id-none": ("geom_id", None, np.eye(4)),
+    "geom_id-bool": ("geom_id", True, np.eye(4)),  # was taken as 1, the mesh
     "transform-singular": ("transform", "mesh", np.diag([1.0, 1.0, 0.0, 1.0])),
     "transform-nearly-singular": ("transform", "mesh", np.diag([1.0, 1.0, 1e-14, 1.0])),
     "transform-rank-2": ("transform", "mesh", np.array([[1.0, 1, 0, 0], [1, 1, 0, 0],

@@ -219,6 +219,13 @@ def test_a_path_that_is_not_a_path_is_refused():
             Scene.load(path)
 
 
+def test_mmap_must_be_a_bool(saved):
+    path = saved[2]
+    for mmap in (1, "yes", np.array([True, False])):
+        with pytest.raises(ValueError, match="mmap must be True or False"):
+            Scene.load(path, mmap=mmap)
+
+
 def test_header_entry_with_an_offset_past_int64_is_refused(saved, tmp_path):
     # a header that passes its checksum but places an array at 2^63 bytes
     _, _, path, _ = saved
