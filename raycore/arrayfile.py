@@ -36,6 +36,7 @@ from numba import get_num_threads
 from zlib_ng import zlib_ng
 
 from raycore._memory import empty_on_line
+from raycore.rays import flag
 
 MAGIC = b"\x89RAYCORE"
 #: Version of this layout and of what :mod:`raycore.scene_file` puts in it; a reader refuses a
@@ -204,8 +205,7 @@ def read(source, *, mmap=False):
         # open() would take an integer as a file descriptor, and close it
         raise ValueError(f"path must be a file path (str or os.PathLike) or the file's bytes, "
                          f"got {type(source).__name__}")
-    if not isinstance(mmap, (bool, np.bool_)):  # `elif mmap` of an array raised NumPy's error
-        raise ValueError(f"mmap must be True or False, got {mmap!r}")
+    mmap = flag(mmap, "mmap")
     if isinstance(source, (bytes, bytearray, memoryview)):
         raw = empty_on_line(len(source), np.uint8)  # aligned and writable
         raw[:] = np.frombuffer(source, np.uint8)

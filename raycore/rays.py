@@ -22,6 +22,15 @@ def real_number(value, name):
     raise ValueError(f"{name} must be a real number, got {value!r}")
 
 
+def flag(value, name):
+    """``value`` as a bool if it is one (Python's or NumPy's), else ``ValueError`` naming
+    ``name``: ``bool()`` takes any object ("no" is true), and raises NumPy's own unnamed error
+    for an array."""
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    raise ValueError(f"{name} must be True or False, got {value!r}")
+
+
 def integer(value, name, low, high):
     """``value`` if it is an integer (a bool is not) in [low, high], else ``ValueError`` naming
     ``name``."""

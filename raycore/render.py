@@ -25,7 +25,7 @@ from raycore.camera import Camera, check_size, strata
 from raycore.offset import offset_constants, offset_coordinate
 from raycore.primitives._common import as_unit
 from raycore.queries import hit_surface
-from raycore.rays import as_float_array, as_real_array, real_number
+from raycore.rays import as_float_array, as_real_array, flag, real_number
 from raycore.shading import interpolated_normal
 
 SHADINGS = ("depth", "normal", "lambert", "id")
@@ -158,6 +158,7 @@ def _render(scene, band_rays, width, height, shading, weights, smooth, light_dir
     ``last_row - 1``; a pixel's ``len(weights)`` samples together.  ``memory``
     (:class:`_BandMemory`, or None for the whole image at once) holds arrays it may reuse."""
     _check_shading(shading, SHADINGS)
+    smooth = flag(smooth, "smooth")
     if not 0 <= real_number(ambient, "ambient") <= 1:
         raise ValueError(f"ambient must be a number in [0, 1], got {ambient!r}")
     background = as_float_array(background, "background", np.float64, (3,))
@@ -223,6 +224,7 @@ def render_arrays(scene, origins, directions, width, height, shading, *, smooth=
         camera), NaN for misses; ``id``: (height, width) int32 geometry ids, -1 for misses.
     """
     _check_shading(shading, ARRAY_SHADINGS, " for arrays")
+    smooth = flag(smooth, "smooth")
     check_size(width, height)
     if np.shape(origins) != (width * height, 3):
         raise ValueError(f"origins must have shape ({width * height}, 3) for a {width}x{height} "

@@ -23,7 +23,7 @@ from raycore.integrations import open3d as _open3d
 from raycore.mesh import Mesh, affine_inverse, affine_product, validate_transform
 from raycore.primitives import analytic, box, cone, cylinder, disk, plane, sphere
 from raycore.primitives.triangle import WATERTIGHT, triangle_test_code
-from raycore.rays import as_float_array, integer, ray_arrays, refuse, resolve_dtype
+from raycore.rays import as_float_array, flag, integer, ray_arrays, refuse, resolve_dtype
 from raycore.shading import NormalTables, shading_normals
 
 #: Directions for ``contains``: a majority vote over three rays makes the parity test robust to a
@@ -120,13 +120,11 @@ class Scene:
         visible : bool
             False makes the mesh a prototype that only appears through :meth:`add_instance`.
         """
-        if not isinstance(visible, (bool, np.bool_)):  # bool() took any object, and an array
-            # raised NumPy's "truth value is ambiguous"
-            raise ValueError(f"visible must be True or False, got {visible!r}")
+        visible = flag(visible, "visible")
         mesh = Mesh(vertices, faces)
         self._fits(mesh.vertices, "vertices")
         self._meshes.append(mesh)
-        return self._add_object(MESH, mesh=len(self._meshes) - 1, visible=bool(visible))
+        return self._add_object(MESH, mesh=len(self._meshes) - 1, visible=visible)
 
     def add_instance(self, geom_id, transform):
         """Place another copy of mesh ``geom_id`` under a 4x4 affine ``transform``; return its id.

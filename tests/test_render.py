@@ -133,6 +133,7 @@ def test_id_shading_tells_geometries_apart_and_shows_background():
     ({"directions": 1.0}, "directions"),
     ({"directions": np.ones((5, 3))}, "directions"),
     ({"directions": {"a": 1}}, "directions"),
+    ({"smooth": "no"}, "smooth"),  # was taken as True
 ])
 def test_bad_arguments_name_themselves(change, name):
     origins, directions = _front_view()

@@ -16,8 +16,8 @@ mesh is counted and listed once (Embree may count it once per triangle, or not a
 
 import numpy as np
 
-from raycore.camera import half_tan
-from raycore.rays import as_float_array
+from raycore.camera import MAX_SIDE, half_tan
+from raycore.rays import as_float_array, as_ray_bound, integer, real_number
 
 #: Open3D's ``RaycastingScene.INVALID_ID``: the id of a miss.
 INVALID_ID = np.iinfo(np.uint32).max
@@ -110,7 +110,21 @@ def test_occlusions(scene, rays, tnear=0.0, tfar=np.inf, nthreads=0):
     """(...,) bool: whether anything lies on each ray within [tnear, tfar], as
     ``RaycastingScene.test_occlusions``."""
     origins, directions, shape = _rays(scene, rays, nthreads)
+    tnear, tfar = (_bound(value, name, len(origins), scene.dtype)
+                   for value, name in ((tnear, "tnear"), (tfar, "tfar")))
     return scene.occluded(origins, directions, tnear, tfar).reshape(shape)
+
+
+def _bound(value, name, count, dtype):
+    """A ray bound, checked here so that an error names it as Open3D does (the Scene's query
+    calls it tmin or tmax): a number as a float, an array as :func:`raycore.rays.as_ray_bound`
+    makes it, which the query then takes as it is."""
+    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
+        value = real_number(value, name)
+        if value != value:
+            raise ValueError(f"{name} must not be NaN")
+        return value
+    return as_ray_bound(value, name, count, dtype)
 
 
 test_occlusions.__test__ = False  # a query, not a test, for pytest collecting its importers
@@ -131,7 +145,8 @@ def create_rays_pinhole(*args, **kwargs):
 
 
 def _pinhole_look_at(fov_deg, center, eye, up, width_px, height_px):
-    if not 0 < fov_deg < 180:
+    _check_pixels(width_px, height_px)  # before the focal length is made of width_px
+    if not 0 < real_number(fov_deg, "fov_deg") < 180:
         raise ValueError(f"fov_deg must be in (0, 180), got {fov_deg!r}")
     center, eye, up = (as_float_array(v, name, np.float64, (3,))
                        for v, name in ((center, "center"), (eye, "eye"), (up, "up")))
@@ -150,10 +165,13 @@ def _pinhole_look_at(fov_deg, center, eye, up, width_px, height_px):
     return _pinhole(intrinsic, extrinsic, width_px, height_px)
 
 
+def _check_pixels(width_px, height_px):
+    integer(width_px, "width_px", 1, MAX_SIDE)
+    integer(height_px, "height_px", 1, MAX_SIDE)
+
+
 def _pinhole(intrinsic_matrix, extrinsic_matrix, width_px, height_px):
-    for value, name in ((width_px, "width_px"), (height_px, "height_px")):
-        if not isinstance(value, (int, np.integer)) or value < 1:
-            raise ValueError(f"{name} must be a positive integer, got {value!r}")
+    _check_pixels(width_px, height_px)
     intrinsic = as_float_array(_numpy(intrinsic_matrix), "intrinsic_matrix", np.float64, (3, 3))
     extrinsic = as_float_array(_numpy(extrinsic_matrix), "extrinsic_matrix", np.float64, (4, 4))
     rotation, translation = extrinsic[:3, :3], extrinsic[:3, 3]

@@ -48,7 +48,7 @@ from numba import njit
 from trimesh import caching
 
 from raycore.primitives.triangle import triangle_test_code
-from raycore.rays import as_float_array
+from raycore.rays import as_float_array, flag, integer
 from raycore.scene import Scene
 
 #: A hit within this many units in the last place of the origin's (or the mesh's) coordinates is
@@ -88,7 +88,7 @@ class RayMeshIntersector:
         if not isinstance(mesh, trimesh.Trimesh):
             raise ValueError(f"mesh must be a trimesh.Trimesh, got {type(mesh).__name__}")
         self.mesh = mesh
-        self._scale_to_box = bool(scale_to_box)
+        self._scale_to_box = flag(scale_to_box, "scale_to_box")
         self._triangle_test = options.pop("triangle_test", "watertight")
         triangle_test_code(self._triangle_test)  # refuse a bad name now, not at the first query
         self._scene_options = {"dtype": "float64", **options}
@@ -187,8 +187,9 @@ class RayMeshIntersector:
         locations : ndarray of float64, shape (m, 3)
             Hit points, only with ``return_locations``.
         """
-        if not isinstance(max_hits, (int, np.integer)) or max_hits < 0:
-            raise ValueError(f"max_hits must be a non-negative integer, got {max_hits!r}")
+        integer(max_hits, "max_hits", 0, np.inf)
+        multiple_hits = flag(multiple_hits, "multiple_hits")
+        return_locations = flag(return_locations, "return_locations")
         origins, directions, usable, local, local_directions, tmin = self._rays(ray_origins,
                                                                                  ray_directions)
         scene = self._scene

@@ -117,3 +117,28 @@ def test_bad_rays_are_refused_naming_the_argument():
         scene.create_rays_pinhole(180.0, [0, 0, 0], [0, 0, 1], [0, 1, 0], 4, 4)
     with pytest.raises(ValueError, match="width_px"):
         scene.create_rays_pinhole(np.eye(3), np.eye(4), 0, 4)
+    # Open3D's names for the bounds, not the Scene's (tmin, tmax)
+    with pytest.raises(ValueError, match="tnear"):
+        scene.test_occlusions(np.ones((1, 6)), tnear=np.nan)
+    with pytest.raises(ValueError, match="tfar"):
+        scene.test_occlusions(np.ones((2, 6)), tfar=[1.0, np.nan])
+    with pytest.raises(ValueError, match="tfar"):
+        scene.test_occlusions(np.ones((2, 6)), tfar="far")
+    # were TypeErrors: a comparison with None, and width_px used before it was checked
+    with pytest.raises(ValueError, match="fov_deg"):
+        scene.create_rays_pinhole(None, [0, 0, 0], [0, 0, 1], [0, 1, 0], 4, 4)
+    with pytest.raises(ValueError, match="width_px"):
+        scene.create_rays_pinhole(60.0, [0, 0, 0], [0, 0, 1], [0, 1, 0], "4", 4)
+    with pytest.raises(ValueError, match="height_px"):
+        scene.create_rays_pinhole(60.0, [0, 0, 0], [0, 0, 1], [0, 1, 0], 4, True)
+
+
+def test_occlusion_bounds_as_numbers_and_arrays_answer_alike():
+    scene = raycore.Scene()
+    scene.add_sphere([0, 0, 0], 1.0)
+    rays = np.tile([0.0, 0.0, 5.0, 0.0, 0.0, -1.0], (3, 1))  # the sphere from 4 to 6
+    np.testing.assert_array_equal(scene.test_occlusions(rays, tfar=np.float32(3.5)), [False] * 3)
+    np.testing.assert_array_equal(scene.test_occlusions(rays, tnear=2**70, tfar=np.inf),
+                                  [False] * 3)
+    np.testing.assert_array_equal(scene.test_occlusions(rays, tfar=[3.5, 4.5, np.inf]),
+                                  [False, True, True])

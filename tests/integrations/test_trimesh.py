@@ -301,6 +301,14 @@ def test_options_reach_raycore_and_bad_ones_are_refused():
         ours.intersects_any([[0, 0, 0]], [[0, 1]])
     with pytest.raises(ValueError, match="max_hits"):
         ours.intersects_id([[0, 0, 0]], [[0, 0, 1]], max_hits=-1)
+    # were taken: True as 1 hit, and any object by its truth value (an array's is an error)
+    with pytest.raises(ValueError, match="max_hits"):
+        ours.intersects_id([[0, 0, 0]], [[0, 0, 1]], max_hits=True)
+    for name in ("multiple_hits", "return_locations"):
+        with pytest.raises(ValueError, match=f"{name} must be True or False"):
+            ours.intersects_id([[0, 0, 0]], [[0, 0, 1]], **{name: np.array([True, False])})
+    with pytest.raises(ValueError, match="scale_to_box must be True or False"):
+        RayMeshIntersector(mesh, scale_to_box="no")
     # a zero direction hits nothing, as in trimesh
     assert ours.intersects_first([[0, 0, 5], [0, 0, 5]], [[0, 0, 0], [0, 0, -1]])[0] == -1
     tri, ray = ours.intersects_id(np.zeros((0, 3)), np.zeros((0, 3)))
