@@ -31,6 +31,7 @@ import numpy as np
 
 from raycore.hits import check_fields
 from raycore.rays import integer
+from raycore.scene import check_scene
 
 __all__ = ["intersect", "occluded", "count", "intersect_all"]
 
@@ -98,6 +99,7 @@ def _chunk_all(scene, origins, directions, tmin, tmax, start, options):
 
 def _run(function, scene, origins, directions, tmin, tmax, *args):
     """``(delayed result, rays)`` of ``function`` on each chunk of rays."""
+    check_scene(scene)
     chunks, rows = _ray_chunks(origins, directions, tmin, tmax)
     task = _scene_task(scene)
     call = dask.delayed(function, pure=True)
@@ -126,12 +128,12 @@ def intersect(scene, origins, directions, tmin=0.0, tmax=np.inf, *, triangle_tes
     """
     fields = check_fields(fields)
     options = {"triangle_test": triangle_test, "sphere_method": sphere_method, "fields": fields}
+    parts = _run(_chunk_intersect, scene, origins, directions, tmin, tmax, options)
     real = np.dtype(scene.dtype)
     specs = {"t": (real, (), True), "geom_id": (np.int64, (), True),
              "prim_id": (np.int64, (), True), "uv": (real, (2,), True),
              "normal": (real, (3,), True), "point": (real, (3,), True),
              "shading_normal": (real, (3,), True)}
-    parts = _run(_chunk_intersect, scene, origins, directions, tmin, tmax, options)
     return _fields(parts, {name: specs[name] for name in ("t", "geom_id", "prim_id", *fields)})
 
 

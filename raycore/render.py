@@ -26,6 +26,7 @@ from raycore.offset import offset_constants, offset_coordinate
 from raycore.primitives._common import as_unit
 from raycore.queries import hit_surface
 from raycore.rays import as_float_array, as_real_array, flag, real_number
+from raycore.scene import check_scene
 from raycore.shading import interpolated_normal
 
 SHADINGS = ("depth", "normal", "lambert", "id")
@@ -78,6 +79,7 @@ def render(scene, origins, directions, width, height, shading="lambert", *, samp
     ValueError
         Naming the argument that is wrong.
     """
+    check_scene(scene)
     check_size(width, height)
     _, _, weights = strata(samples)
     rays = width * height * samples
@@ -114,6 +116,7 @@ def render_camera(scene, camera, shading="lambert", *, samples=1, seed=0, **opti
     ndarray of uint8, shape (camera.height, camera.width, 3)
         The image :func:`render` makes of ``camera.rays(scene.dtype, samples, seed)``.
     """
+    check_scene(scene)
     if not isinstance(camera, Camera):
         raise ValueError(f"camera must be a raycore.camera.Camera (perspective_camera or "
                          f"orthographic_camera), got {type(camera).__name__}")
@@ -223,6 +226,7 @@ def render_arrays(scene, origins, directions, width, height, shading, *, smooth=
         ``normal``: (height, width, 3) unit normals as intersect gives them (not turned to the
         camera), NaN for misses; ``id``: (height, width) int32 geometry ids, -1 for misses.
     """
+    check_scene(scene)
     _check_shading(shading, ARRAY_SHADINGS, " for arrays")
     smooth = flag(smooth, "smooth")
     check_size(width, height)

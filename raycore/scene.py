@@ -523,6 +523,14 @@ class Scene:
         return cls.from_trimesh(load_trimesh(path), dtype=dtype, **build)
 
 
+def check_scene(scene):
+    """``scene`` if it is a :class:`Scene`, else ``ValueError`` naming it (for functions that
+    take one, which raised AttributeError on the first attribute they read)."""
+    if isinstance(scene, Scene):
+        return scene
+    raise ValueError(f"scene must be a raycore.Scene, got {type(scene).__name__}")
+
+
 def _joined(parts):
     """The arrays ``parts`` (one or more, of one dtype and row shape) end to end, starting on a
     cache line; a lone one as it is (a copy of a large mesh's tree took as much memory again as

@@ -149,6 +149,15 @@ def test_render_camera_refuses_what_is_not_a_camera(camera):
         render_camera(_sphere_scene(), camera)
 
 
+@pytest.mark.parametrize("call", ["render", "render_camera", "render_arrays"])
+def test_what_is_not_a_scene_is_refused(call):
+    camera = orthographic_camera([0, 0, -5], [0, 0, 0], [0, 1, 0], 2.0, SIZE, SIZE)
+    args = {"render": (*_front_view(), SIZE, SIZE), "render_camera": (camera,),
+            "render_arrays": (*_front_view(), SIZE, SIZE, "depth")}[call]
+    with pytest.raises(ValueError, match="scene must be a raycore.Scene, got str"):
+        getattr(render_module, call)("scene.json", *args)
+
+
 def test_render_arrays_refuses_a_shading_that_is_not_a_name():
     with pytest.raises(ValueError, match="shading"):
         render_arrays(_sphere_scene(), *_front_view(), SIZE, SIZE, np.array(["depth", "id"]))

@@ -113,6 +113,12 @@ def test_max_hits_bounds_each_chunk_and_its_error_reaches_the_client(client, sce
                                                                   max(per_chunk) - 1)
 
 
+@pytest.mark.parametrize("query", raycore.dask.__all__)
+def test_what_is_not_a_scene_is_refused_before_any_task_runs(query):
+    with pytest.raises(ValueError, match="scene must be a raycore.Scene, got dict"):
+        getattr(raycore.dask, query)({}, np.zeros((4, 3)), np.ones((4, 3)))
+
+
 @pytest.mark.parametrize("max_hits", [-1, 2.5, True])
 def test_a_bad_max_hits_is_refused_before_any_task_runs(max_hits):
     scene = Scene()
