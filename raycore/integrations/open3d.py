@@ -166,6 +166,8 @@ def _pinhole_look_at(fov_deg, center, eye, up, width_px, height_px):
 
 
 def _check_pixels(width_px, height_px):
+    """``ValueError`` naming ``width_px`` or ``height_px`` unless both are integers in [1,
+    MAX_SIDE], as the Scene's own cameras take their sizes."""
     integer(width_px, "width_px", 1, MAX_SIDE)
     integer(height_px, "height_px", 1, MAX_SIDE)
 
