@@ -8,7 +8,7 @@ PORT   ?= 8000
 # pytest's arguments: every test by default
 TESTS  ?=
 
-.PHONY: run test test-py313 fuzz load bench chart openapi lint clean image-test wheel
+.PHONY: run test test-py312 test-py313 fuzz load bench chart openapi lint clean image-test wheel
 
 # One stamp per set of extras, so that `make test` does not pull in the benchmark stack.
 $(BIN)/python:
@@ -37,20 +37,23 @@ run: $(VENV)/.dev-installed
 test: $(VENV)/.dev-installed
 	$(BIN)/python -m pytest $(TESTS)
 
-# Python 3.13 (on the PATH, else pyenv's newest 3.13) in .venv-py313: the library's and the
-# service's tests that reach every kernel, in both precisions, and the service end to end.
-# Left out, for CI's time: the stability catalogue, the primitives' exact references and the
-# service's fuzzing, which compile nothing that these do not.
-PYTHON313 ?= $(or $(shell python3.13 -c 'import sys; print(sys.executable)' 2>/dev/null),\
-	$(lastword $(sort $(wildcard $(shell pyenv root 2>/dev/null)/versions/3.13*/bin/python3.13))))
-PY313_TESTS ?= tests/scene tests/bvh tests/service tests/test_camera.py tests/test_sensors.py tests/test_offset.py \
+# Python 3.12 and 3.13 (each on the PATH, else pyenv's newest of it) in .venv-py312 and
+# .venv-py313: the library's and the service's tests that reach every kernel, in both
+# precisions, and the service end to end.  Left out, for CI's time: the stability catalogue, the
+# primitives' exact references and the service's fuzzing, which compile nothing that these do
+# not.  PYTHON312 or PYTHON313 names another interpreter.
+python_named = $(or $(shell python$(1) -c 'import sys; print(sys.executable)' 2>/dev/null),\
+	$(lastword $(sort $(wildcard $(shell pyenv root 2>/dev/null)/versions/$(1).*/bin/python$(1)))))
+PYTHON312 ?= $(call python_named,3.12)
+PYTHON313 ?= $(call python_named,3.13)
+OTHER_PYTHON_TESTS ?= tests/scene tests/bvh tests/service tests/test_camera.py tests/test_sensors.py tests/test_offset.py \
 	tests/test_render.py tests/test_threading.py tests/test_info.py tests/test_compile_notice.py tests/test_warmup.py \
 	tests/test_ray_bounds.py tests/test_target.py tests/commands tests/integrations/test_trimesh.py \
 	tests/integrations/test_dask.py \
 	--ignore tests/service/test_schemathesis.py --ignore tests/service/test_fuzz.py
-test-py313:
-	@test -n "$(PYTHON313)" || (echo "test-py313 needs Python 3.13 (python3.13, or pyenv's)"; exit 2)
-	$(MAKE) test PYTHON="$(PYTHON313)" VENV=.venv-py313 TESTS="$(PY313_TESTS)"
+test-py312 test-py313: test-py3%:
+	@test -n "$(PYTHON3$*)" || (echo "$@ needs Python 3.$* (python3.$*, or pyenv's)"; exit 2)
+	$(MAKE) test PYTHON="$(PYTHON3$*)" VENV=.venv-py3$* TESTS="$(OTHER_PYTHON_TESTS)"
 
 # Schemathesis (`schemathesis run --checks all`, schemathesis.toml) against a real service with
 # and without an API key, FUZZ_EXAMPLES cases per operation and phase: longer than the bounded
@@ -112,5 +115,5 @@ lint: $(VENV)/.dev-installed
 	$(BIN)/ruff check .
 
 clean:
-	rm -rf $(VENV) .venv-py313 build dist *.egg-info
+	rm -rf $(VENV) .venv-py312 .venv-py313 build dist *.egg-info
 	find . -name __pycache__ -prune -exec rm -rf {} +
