@@ -12,8 +12,29 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 from numba.np.numpy_support import as_dtype
 
-#: Children per wide node.
-WIDTH = 8
+from raycore.bvh.layout import NODE_WIDTH, WIDTH
+
+#: Bytes of a wide node's row (:mod:`raycore.bvh.layout`): NODE_WIDTH float32 or int32.
+NODE_BYTES = NODE_WIDTH * 4
+
+
+def _row_start(context, builder, array_type, array, row, row_bytes):
+    """``array[row, 0]``'s address as an i8*, for rows of ``row_bytes`` bytes (node rows and
+    leaf blocks, whose lengths the library fixes and scene files are checked for).
+
+    A constant stride: Numba's indexing multiplies by the row length it reads from the array,
+    a multiply and a reload of that length on the way to every node and leaf block.  Constant,
+    random rays took 1-3 % less time (one thread, float32, x86-64-v3 and v4 code; fandisk, spot,
+    teapot, stanford-bunny), camera rays 1-3 %.
+    """
+    if array_type.layout != "C" or array_type.ndim != 2:
+        raise TypeError(f"rows of a C-contiguous 2-D array, not {array_type}")
+    data = context.make_array(array_type)(context, builder, array).data
+    int64 = ir.IntType(64)
+    row = row if row.type == int64 else builder.sext(row, int64)
+    offset = builder.mul(row, ir.Constant(int64, row_bytes))
+    return builder.gep(builder.bitcast(data, ir.IntType(8).as_pointer()), [offset],
+                       inbounds=True)
 
 
 def _splat(builder, vector, value):
@@ -45,9 +66,7 @@ def enter8(typingctx, nodes, row, ray, tmin, tmax, entry):
 
     def codegen(context, builder, signature, args):
         nodes_v, row_v, ray_v, tmin_v, tmax_v, entry_v = args
-        table = context.make_array(signature.args[0])(context, builder, nodes_v)
-        start = cgutils.get_item_pointer(context, builder, signature.args[0], table,
-                                         [row_v, ir.Constant(ir.IntType(64), 0)])
+        start = _row_start(context, builder, signature.args[0], nodes_v, row_v, NODE_BYTES)
         vector = ir.VectorType(ir.FloatType(), WIDTH)
         first = builder.bitcast(start, vector.as_pointer())
         values = [builder.extract_value(ray_v, k) for k in range(12)]
@@ -96,24 +115,21 @@ def prefetch_row(typingctx, nodes, row):
     this made them 3-6 % faster (stanford-bunny, nefertiti; one and two threads), and coherent
     rays, which find their nodes in the cache, no slower.
     """
-    return types.void(nodes, row), _prefetch_codegen(range(0, 256, 64))
+    return types.void(nodes, row), _prefetch_codegen(NODE_BYTES)
 
 
-def _prefetch_codegen(offsets):
-    """Codegen of a prefetch intrinsic ``(table, row)``: ask for the cache lines that hold the
-    bytes at ``offsets`` from the start of row ``row`` of the 2D array ``table``."""
+def _prefetch_codegen(row_bytes):
+    """Codegen of a prefetch intrinsic ``(table, row)``: ask for the cache lines of row ``row``
+    of the 2D array ``table``, whose rows are ``row_bytes`` long."""
     def codegen(context, builder, signature, args):
         table_v, row_v = args
-        table = context.make_array(signature.args[0])(context, builder, table_v)
-        start = cgutils.get_item_pointer(context, builder, signature.args[0], table,
-                                         [row_v, ir.Constant(ir.IntType(64), 0)])
+        base = _row_start(context, builder, signature.args[0], table_v, row_v, row_bytes)
         byte = ir.IntType(8).as_pointer()
-        base = builder.bitcast(start, byte)
         i32 = ir.IntType(32)
         function = cgutils.get_or_insert_function(
             builder.module, ir.FunctionType(ir.VoidType(), [byte, i32, i32, i32]),
             "llvm.prefetch.p0i8")
-        for offset in offsets:
+        for offset in range(0, row_bytes, 64):
             address = builder.gep(base, [ir.Constant(ir.IntType(64), offset)])
             # a read (0), to be kept in every cache level (3), of data (1)
             builder.call(function, [address, ir.Constant(i32, 0), ir.Constant(i32, 3),
@@ -121,6 +137,22 @@ def _prefetch_codegen(offsets):
         return context.get_dummy_value()
 
     return codegen
+
+
+@intrinsic
+def node_int(typingctx, refs, row, column):
+    """``refs[row, column]`` (an int32, as an int64) of a node table's int32 view, at the
+    constant stride of :func:`_row_start`."""
+    sig = types.int64(refs, row, column)
+
+    def codegen(context, builder, signature, args):
+        refs_v, row_v, column_v = args
+        start = _row_start(context, builder, signature.args[0], refs_v, row_v, NODE_BYTES)
+        value = builder.gep(builder.bitcast(start, ir.IntType(32).as_pointer()), [column_v],
+                            inbounds=True)
+        return builder.sext(builder.load(value, align=4), ir.IntType(64))
+
+    return sig, codegen
 
 
 @intrinsic
@@ -193,7 +225,7 @@ def prefetch_block(typingctx, blocks, block):
     3-7 % faster in float32 and 1-9 % in float64 (closest, any hit, count; stanford-bunny and
     nefertiti, one thread), up to 3 % on teapot and suzanne, cameras 0-2 %.
     """
-    return types.void(blocks, block), _prefetch_codegen(range(0, BLOCK_BYTES, 64))
+    return types.void(blocks, block), _prefetch_codegen(BLOCK_BYTES)
 
 
 @intrinsic
@@ -205,11 +237,8 @@ def block_face(typingctx, blocks, block, lane):
     def codegen(context, builder, signature, args):
         blocks_v, block_v, lane_v = args
         int64 = ir.IntType(64)
-        table = context.make_array(signature.args[0])(context, builder, blocks_v)
-        start = cgutils.get_item_pointer(context, builder, signature.args[0], table,
-                                         [block_v, ir.Constant(int64, 0)])
-        plane = builder.gep(builder.bitcast(start, ir.IntType(8).as_pointer()),
-                            [ir.Constant(int64, FACE_PLANE * VECTOR_BYTES)])
+        start = _row_start(context, builder, signature.args[0], blocks_v, block_v, BLOCK_BYTES)
+        plane = builder.gep(start, [ir.Constant(int64, FACE_PLANE * VECTOR_BYTES)])
         face = builder.gep(builder.bitcast(plane, ir.IntType(32).as_pointer()), [lane_v])
         return builder.sext(builder.load(face, align=4), int64)
 
@@ -265,9 +294,7 @@ def watertight_block(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, s
         lanes = lanes_for(as_dtype(signature.args[0].dtype))
         vector = ir.VectorType(scalar, lanes)
         int64 = ir.IntType(64)
-        table = context.make_array(signature.args[0])(context, builder, blocks_v)
-        start = cgutils.get_item_pointer(context, builder, signature.args[0], table,
-                                         [block_v, ir.Constant(int64, 0)])
+        start = _row_start(context, builder, signature.args[0], blocks_v, block_v, BLOCK_BYTES)
         first = builder.bitcast(start, vector.as_pointer())
 
         def splat(value):

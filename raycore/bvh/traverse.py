@@ -35,6 +35,7 @@ from raycore.bvh.simd import (
     block_lanes,
     enter8,
     lowest_set_bit,
+    node_int,
     nonnegative,
     prefetch_block,
     prefetch_row,
@@ -255,8 +256,8 @@ def _descend(nodes, refs, row, row_base, box, lo, hi, stack, stack_t, top, entry
         # visit the entered children only, without a branch per slot
         j = lowest_set_bit(mask)
         mask &= mask - 1
-        ref = refs[row, REFS + j]
-        count = refs[row, COUNTS + j]
+        ref = node_int(refs, row, REFS + j)
+        count = node_int(refs, row, COUNTS + j)
         if count > 0:
             if len(blocks):  # a mesh's leaf: its blocks load while the others are visited
                 lanes = block_lanes(blocks)
