@@ -524,9 +524,10 @@ class Scene:
 
 
 def check_scene(scene):
-    """``scene`` if it is a :class:`Scene`, else ``ValueError`` naming it (for functions that
-    take one, which raised AttributeError on the first attribute they read)."""
-    if isinstance(scene, Scene):
+    """``scene`` if it answers as a :class:`Scene` does (a Scene, or a proxy of one, such as the
+    benchmarks' timing wrappers), else ``ValueError`` naming it: functions that take a scene
+    raised AttributeError on the first attribute they read."""
+    if all(hasattr(scene, name) for name in ("dtype", "intersect", "occluded")):
         return scene
     raise ValueError(f"scene must be a raycore.Scene, got {type(scene).__name__}")
 
