@@ -54,11 +54,11 @@ def half_tan(fov):
 MAX_SIDE = 2**31 - 1
 
 
-def check_size(width, height):
-    """``ValueError`` naming ``width`` or ``height`` unless both are integers in [1,
-    MAX_SIDE]."""
-    integer(width, "width", 1, MAX_SIDE)
-    integer(height, "height", 1, MAX_SIDE)
+def check_size(width, height, names=("width", "height")):
+    """``ValueError`` naming ``width`` or ``height`` (or the caller's ``names`` for them) unless
+    both are integers in [1, MAX_SIDE]."""
+    integer(width, names[0], 1, MAX_SIDE)
+    integer(height, names[1], 1, MAX_SIDE)
 
 
 def _pixel_grid(width, height):

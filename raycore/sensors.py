@@ -181,7 +181,7 @@ def _ranges(min_range, max_range):
         raise ValueError(f"min_range must be finite and >= 0, got {min_range!r}")
     if not max_range > min_range:  # also refuses NaN
         raise ValueError(f"max_range must be above min_range ({min_range}), got {max_range!r}")
-    return float(min_range), float(max_range)
+    return min_range, max_range
 
 
 #: Channels, and columns, at most: a count that NumPy could not have made an array of (a

@@ -16,8 +16,8 @@ mesh is counted and listed once (Embree may count it once per triangle, or not a
 
 import numpy as np
 
-from raycore.camera import MAX_SIDE, half_tan
-from raycore.rays import as_float_array, as_ray_bound, integer, real_number
+from raycore.camera import check_size, half_tan
+from raycore.rays import as_float_array, as_ray_bound, real_number
 
 #: Open3D's ``RaycastingScene.INVALID_ID``: the id of a miss.
 INVALID_ID = np.iinfo(np.uint32).max
@@ -145,7 +145,7 @@ def create_rays_pinhole(*args, **kwargs):
 
 
 def _pinhole_look_at(fov_deg, center, eye, up, width_px, height_px):
-    _check_pixels(width_px, height_px)  # before the focal length is made of width_px
+    check_size(width_px, height_px, _PIXELS)  # before the focal length is made of width_px
     if not 0 < real_number(fov_deg, "fov_deg") < 180:
         raise ValueError(f"fov_deg must be in (0, 180), got {fov_deg!r}")
     center, eye, up = (as_float_array(v, name, np.float64, (3,))
@@ -165,15 +165,12 @@ def _pinhole_look_at(fov_deg, center, eye, up, width_px, height_px):
     return _pinhole(intrinsic, extrinsic, width_px, height_px)
 
 
-def _check_pixels(width_px, height_px):
-    """``ValueError`` naming ``width_px`` or ``height_px`` unless both are integers in [1,
-    MAX_SIDE], as the Scene's own cameras take their sizes."""
-    integer(width_px, "width_px", 1, MAX_SIDE)
-    integer(height_px, "height_px", 1, MAX_SIDE)
+#: Open3D's names for an image's width and height.
+_PIXELS = ("width_px", "height_px")
 
 
 def _pinhole(intrinsic_matrix, extrinsic_matrix, width_px, height_px):
-    _check_pixels(width_px, height_px)
+    check_size(width_px, height_px, _PIXELS)
     intrinsic = as_float_array(_numpy(intrinsic_matrix), "intrinsic_matrix", np.float64, (3, 3))
     extrinsic = as_float_array(_numpy(extrinsic_matrix), "extrinsic_matrix", np.float64, (4, 4))
     rotation, translation = extrinsic[:3, :3], extrinsic[:3, 3]
