@@ -601,12 +601,21 @@ def _face_id(scene, obj, prim):
     return np.int64(0)
 
 
+@njit(cache=True, inline="always")
+def _plus_zero(t):
+    """``t``, with -0 made +0: a ray that starts on a surface and heads into it hits it at
+    t = -0 (a plane's or a triangle's distance is a zero numerator over a signed denominator),
+    which is the right distance, but printed or sent as JSON it reads as a negative one.  An
+    added +0 changes no other value."""
+    return t + like(t, 0)
+
+
 @njit(cache=True, forceinline=True, _nrt=False)
 def _list(scene, hit_t, hit_obj, hit_prim, kept, hits_t, hits_obj, hits_prim, at):
     """ALL and LIST modes: copy a ray's ``kept`` merged crossings to the hit buffers from
     ``at`` on, with face ids for mesh hits."""
     for j in range(kept):
-        hits_t[at + j] = hit_t[j]
+        hits_t[at + j] = _plus_zero(hit_t[j])
         hits_obj[at + j] = hit_obj[j]
         hits_prim[at + j] = _face_id(scene, hit_obj[j], hit_prim[j])
 
@@ -722,7 +731,7 @@ def _trace_each(scene, mode, test, sphere_method, origins, directions, tmin, tma
         if mode == ANY:
             out_hit[i] = obj >= 0
         elif mode == CLOSEST:
-            out_t[i] = t if obj >= 0 else like(t, np.inf)
+            out_t[i] = _plus_zero(t) if obj >= 0 else like(t, np.inf)
             out_obj[i] = obj
             out_prim[i] = _face_id(scene, obj, prim) if obj >= 0 else -1
             if barycentrics:

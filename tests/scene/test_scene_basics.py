@@ -188,3 +188,20 @@ def test_rays_listing_more_crossings_than_their_batch_has_room_for(dtype, monkey
         alone = scene.intersect_all(origins[i:i + 1], directions[i:i + 1])
         np.testing.assert_array_equal(alone.t, all_hits.t[all_hits.ray_index == i])
         np.testing.assert_array_equal(alone.prim_id, all_hits.prim_id[all_hits.ray_index == i])
+
+
+def test_a_ray_starting_on_a_surface_hits_it_at_plus_zero(dtype):
+    # a plane's and a triangle's distance is a zero numerator over a signed denominator: -0
+    # for rays heading into the surface, which JSON and print showed as a negative distance
+    scene = Scene(dtype=dtype)
+    scene.add_plane([0, 0, 0], [0, 1, 0])
+    scene.add_mesh([[0, 1, 0], [1, 1, 0], [0, 1, 1]], [[0, 1, 2]])
+    scene.add_disk([0, 3, 0], [0, 1, 0], 1.0)
+    origins = np.array([[0.5, 0, 0.5], [0.25, 1, 0.25], [0.1, 3, 0.1]] * 2)
+    directions = np.array([[0, 1, 0]] * 3 + [[0, -1, 0]] * 3)
+    hits = scene.intersect(origins, directions)
+    assert hits.hit.all() and (hits.t == 0).all()
+    assert not np.signbit(hits.t).any()
+    crossings = scene.intersect_all(origins, directions)
+    assert (crossings.t == 0).sum() == 6
+    assert not np.signbit(crossings.t).any()
