@@ -6,6 +6,7 @@ changes.  Analytic shapes stay analytic: a sphere is one object, not a tessellat
 """
 
 import itertools
+import os
 import threading
 import time
 
@@ -517,10 +518,24 @@ class Scene:
 
     @classmethod
     def from_file(cls, path, dtype="float32", **build):
-        """Load a mesh file (OBJ, PLY, STL, OFF, GLB, ... through trimesh) into a Scene."""
+        """Load a mesh file (OBJ, PLY, STL, OFF, GLB, ... through trimesh) into a Scene.
+
+        Raises
+        ------
+        ValueError
+            Naming ``path`` and the file, when it is not a path or trimesh cannot read it.
+        """
         from raycore.mesh import load_trimesh
 
-        return cls.from_trimesh(load_trimesh(path), dtype=dtype, **build)
+        if not isinstance(path, (str, os.PathLike)):
+            # trimesh would take it as a file type it does not know
+            raise ValueError(f"path must be a file path (str or os.PathLike), got "
+                             f"{type(path).__name__}")
+        try:
+            loaded = load_trimesh(path)
+        except ValueError as error:
+            raise ValueError(f"path {os.fspath(path)!r}: {error}") from error
+        return cls.from_trimesh(loaded, dtype=dtype, **build)
 
 
 def check_scene(scene):

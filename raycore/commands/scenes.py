@@ -52,7 +52,8 @@ def load_scene(path, dtype, progress):
             # trimesh keeps a glTF's repeated geometry as instances of one stored mesh
             scene = Scene.from_file(path, dtype=dtype or "float32")
         except ValueError as error:
-            raise CommandError(f"{path}: {error}") from error
+            # the command names the file, where the library named its argument (``path``)
+            raise CommandError(f"{path}: {error.__cause__ or error}") from error
     with progress.stage(f"building the BVH of {scene.triangle_count:,} triangles"):
         scene.build()
     return scene, None

@@ -271,12 +271,15 @@ def test_contains_refuses_bad_points(dtype, points):
 def test_from_trimesh_and_from_file_refuse_what_they_cannot_read(tmp_path):
     with pytest.raises(ValueError, match="mesh_or_scene"):
         Scene.from_trimesh(42)
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="path .*missing.obj.*could not read"):
         Scene.from_file(tmp_path / "missing.obj")
     garbage = tmp_path / "garbage.obj"
     garbage.write_text("this is not a mesh\n")
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="path .*garbage.obj"):
         Scene.from_file(garbage)
+    for not_a_path in (None, 3, b"mesh.obj"):
+        with pytest.raises(ValueError, match="path must be a file path"):
+            Scene.from_file(not_a_path)
 
 
 # ---------------------------------------------------------------------- no NaN hits
