@@ -494,7 +494,7 @@ def _move_lists(listed_at, counts, places, listed_t, listed_obj, listed_prim, hi
 
 
 def surface_fields(record, origins, directions, t, obj, slot, u, v, want_uv, want_normal,
-                   want_point):
+                   want_point, miss=np.nan):
     """Surface data of closest hits, computed after traversal and only for the asked fields.
 
     Parameters
@@ -507,12 +507,16 @@ def surface_fields(record, origins, directions, t, obj, slot, u, v, want_uv, wan
         analytic one.
     u, v : ndarray, shape (N,)
         Barycentrics of mesh hits.
+    miss : float
+        The misses' rows: NaN, or what a caller's format asks (Open3D's zeros, written here
+        rather than by a pass over the fields after: that pass took a seventh of a
+        ``cast_rays``).
 
     Returns
     -------
     uv : ndarray, shape (N, 2) or (0, 2)
     normal, point : ndarray, shape (N, 3) or (0, 3)
-        NaN rows for misses; empty when not asked for.
+        ``miss`` rows for misses; empty when not asked for.
     """
     n = len(t)
     # NumPy's arrays on a huge page boundary (raycore._memory), filled without reference
@@ -520,7 +524,8 @@ def surface_fields(record, origins, directions, t, obj, slot, u, v, want_uv, wan
     uv = empty_aligned((n if want_uv else 0, 2), t.dtype)
     normal = empty_aligned((n if want_normal else 0, 3), t.dtype)
     point = empty_aligned((n if want_point else 0, 3), t.dtype)
-    _fill_surface_fields(record, origins, directions, t, obj, slot, u, v, uv, normal, point)
+    _fill_surface_fields(record, origins, directions, t, obj, slot, u, v, uv, normal, point,
+                         float(miss))
     return uv, normal, point
 
 
@@ -543,25 +548,27 @@ def _table_surface(params, row, kind, ox, oy, oz, dx, dy, dz, t, part, want_uv):
 
 
 @njit(cache=True)
-def _fill_surface_fields(record, origins, directions, t, obj, slot, u, v, uv, normal, point):
+def _fill_surface_fields(record, origins, directions, t, obj, slot, u, v, uv, normal, point,
+                         miss):
     _surface_fields(tabled_arrays_of(record), origins, directions, t, obj, slot, u, v, uv, normal,
-                    point)
+                    point, miss)
 
 
 @njit(cache=True, parallel=True, error_model="numpy", _nrt=False)
-def _surface_fields(scene, origins, directions, t, obj, slot, u, v, uv, normal, point):
-    """Fill the rows of ``uv``, ``normal`` and ``point`` (each N rows, or none) for each ray."""
+def _surface_fields(scene, origins, directions, t, obj, slot, u, v, uv, normal, point, miss):
+    """Fill the rows of ``uv``, ``normal`` and ``point`` (each N rows, or none) for each ray;
+    ``miss`` in every value of a miss's rows."""
     n = len(t)
     want_uv, want_normal, want_point = len(uv) == n, len(normal) == n, len(point) == n
     for i in prange(n):
         if obj[i] < 0:
             for a in range(3):
                 if want_uv and a < 2:
-                    uv[i, a] = np.nan
+                    uv[i, a] = miss
                 if want_normal:
-                    normal[i, a] = np.nan
+                    normal[i, a] = miss
                 if want_point:
-                    point[i, a] = np.nan
+                    point[i, a] = miss
             continue
         # before any store: the compiler cannot tell that the outputs do not overlap the rays
         nx, ny, nz, su, sv = hit_surface(scene, origins, directions, t, obj, slot, u, v, i,

@@ -313,7 +313,13 @@ class Scene:
         -------
         Hits
         """
-        fields = check_fields(fields)
+        return self._hits(origins, directions, tmin, tmax, triangle_test, sphere_method,
+                          check_fields(fields))
+
+    def _hits(self, origins, directions, tmin, tmax, triangle_test, sphere_method, fields,
+              miss=np.nan):
+        """:meth:`intersect` of checked ``fields``, with ``miss`` in the surface fields' rows of
+        misses (:func:`raycore.queries.surface_fields`): the Open3D adapter's zeros."""
         rays, t, obj, prim, surface = self._closest_hits(
             origins, directions, tmin, tmax, triangle_test, sphere_method, bool(fields))
         if not fields:
@@ -322,7 +328,7 @@ class Scene:
         smooth = "shading_normal" in fields  # interpolated with u, v; normal where not a mesh
         uv, normal, point = queries.surface_fields(
             self._record, rays[0], rays[1], t, obj, slot, u, v, "uv" in fields,
-            smooth or "normal" in fields, "point" in fields)
+            smooth or "normal" in fields, "point" in fields, miss)
         surface = {"uv": uv, "normal": normal, "point": point}
         if smooth:
             surface["shading_normal"] = self._shading_normals(obj, prim, u, v, normal)

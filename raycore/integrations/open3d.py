@@ -42,13 +42,6 @@ def _ids(ids):
     return ids.astype(np.uint32)
 
 
-def _zero_misses(values):
-    """``values`` ((N, K), a query's own surface field: finite where a ray hit, NaN where it
-    missed) with zeros for misses, as float32; in place, without a branch per row (a masked
-    assignment took 2 ms for 200k rays, half of them missing)."""
-    return np.nan_to_num(values, copy=False).astype(np.float32, copy=False)
-
-
 def cast_rays(scene, rays, nthreads=0):
     """The closest hit of each ray, as ``RaycastingScene.cast_rays``.
 
@@ -67,13 +60,15 @@ def cast_rays(scene, rays, nthreads=0):
         ``primitive_normals`` (..., 3) float32 unit geometric normals, zero on a miss.
     """
     origins, directions, shape = _rays(scene, rays, nthreads)
-    hits = scene.intersect(origins, directions, fields=("uv", "normal"))
+    # zeros for misses, as Open3D gives them, written by the surface pass itself
+    hits = scene._hits(origins, directions, 0.0, np.inf, "watertight", "precise",
+                       ("uv", "normal"), miss=0.0)
     return {
         "t_hit": hits.t.astype(np.float32, copy=False).reshape(shape),
         "geometry_ids": _ids(hits.geom_id).reshape(shape),
         "primitive_ids": _ids(hits.prim_id).reshape(shape),
-        "primitive_uvs": _zero_misses(hits.uv).reshape(*shape, 2),
-        "primitive_normals": _zero_misses(hits.normal).reshape(*shape, 3),
+        "primitive_uvs": hits.uv.astype(np.float32, copy=False).reshape(*shape, 2),
+        "primitive_normals": hits.normal.astype(np.float32, copy=False).reshape(*shape, 3),
     }
 
 
