@@ -120,9 +120,20 @@ def _kernel_array(array, dtype):
 def as_float_array(value, name, dtype, shape=None):
     """:func:`as_real_array`, and refuse NaN and inf entries (``ValueError`` naming ``name``)."""
     array = as_real_array(value, name, dtype, shape)
-    if not np.all(np.isfinite(array)):
+    if not _all_finite(array.reshape(-1)):
         raise ValueError(f"{name} must be finite (no NaN or inf)")
     return array
+
+
+@njit(cache=True)
+def _all_finite(values):
+    """Whether every entry of the 1-D ``values`` is finite: one pass, which LLVM vectorises
+    (no early exit).  ``np.all(np.isfinite(...))`` made a boolean array first and read it
+    again: 0.25 ms of the Open3D adapter's calls on 200k rays, 2 % of each."""
+    finite = True
+    for i in range(len(values)):
+        finite &= np.isfinite(values[i])
+    return finite
 
 
 def as_ray_bound(value, name, count, dtype):
