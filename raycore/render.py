@@ -230,9 +230,9 @@ def render_arrays(scene, origins, directions, width, height, shading, *, smooth=
     _check_shading(shading, ARRAY_SHADINGS, " for arrays")
     smooth = flag(smooth, "smooth")
     check_size(width, height)
-    if np.shape(origins) != (width * height, 3):
-        raise ValueError(f"origins must have shape ({width * height}, 3) for a {width}x{height} "
-                         f"image, got {np.shape(origins)}")
+    origins, directions = (_pixel_rays(value, name, width * height, scene.dtype,
+                                       f"a {width}x{height} image")
+                           for name, value in (("origins", origins), ("directions", directions)))
     field = "shading_normal" if smooth else "normal"
     hits = scene.intersect(origins, directions, triangle_test=triangle_test,
                            fields=(field,) if shading == "normal" else ())

@@ -46,14 +46,15 @@ def load_scene(path, dtype, progress):
         raise CommandError(f"{path}: not a mesh file ({', '.join(MESH_FORMATS)}) nor a scene "
                            "JSON (.json)")
     from raycore import Scene
+    from raycore.mesh import load_trimesh
 
     with progress.stage(f"loading {path.name}"):
         try:
-            # trimesh keeps a glTF's repeated geometry as instances of one stored mesh
-            scene = Scene.from_file(path, dtype=dtype or "float32")
+            # Scene.from_file's steps, whose errors name its argument; the command names the
+            # file.  trimesh keeps a glTF's repeated geometry as instances of one stored mesh.
+            scene = Scene.from_trimesh(load_trimesh(path), dtype=dtype or "float32")
         except ValueError as error:
-            # the command names the file, where the library named its argument (``path``)
-            raise CommandError(f"{path}: {error.__cause__ or error}") from error
+            raise CommandError(f"{path}: {error}") from error
     with progress.stage(f"building the BVH of {scene.triangle_count:,} triangles"):
         scene.build()
     return scene, None
