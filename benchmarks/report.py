@@ -74,6 +74,45 @@ def thread_table(document):
     return lines
 
 
+def avx2_table(document):
+    """raycore's AVX2 kernels against Open3D, beside its AVX-512 kernels' ratios."""
+    avx2 = {mesh["mesh"]: mesh["queries"] for mesh in document["avx2"]["meshes"]}
+    lines = [
+        "| mesh | ray set | query | hits | **f32 / Open3D, AVX2 kernels** "
+        "| f32 / Open3D, AVX-512 kernels (above) |",
+        "|---|---|---|---|---:|---:|",
+    ]
+    for mesh in document["meshes"]:
+        for key, row in avx2[mesh["mesh"]].items():
+            lines.append(
+                f"| {mesh['mesh']} | {' | '.join(ROWS[key])} | {_hits(key, row)} "
+                f"| **{speed_ratio(row, 'raycore-float32', 'open3d'):.2f}** "
+                f"| {speed_ratio(mesh['queries'][key], 'raycore-float32', 'open3d'):.2f} |")
+    return lines
+
+
+def _avx2_section(document):
+    """The AVX2 run's section, where there was one (the main run's kernels used AVX-512)."""
+    if not document.get("avx2"):
+        return []
+    return [
+        "## With AVX2 only (kernels compiled for x86-64-v3)",
+        "",
+        "raycore's kernels use AVX-512 on this machine (x86-64-v4). These rows are the "
+        "closest-hit and shadow sets again in a subprocess whose kernels are compiled for "
+        f"{document['avx2']['cpu_name']} (AVX2 and FMA: `NUMBA_CPU_NAME` and "
+        "`NUMBA_CPU_FEATURES`, as raycore itself chooses on a CPU without AVX-512), against "
+        "Open3D in the same rounds, both on "
+        f"{document['avx2']['numba_threads']} threads. Open3D's Embree has no AVX-512 kernels "
+        "(Open3D 0.20: no `embree::avx512` code in its library, and `perf` samples its "
+        "traversal's hot loop on 256-bit registers), so this is how the two compare on a CPU "
+        "with AVX2 only, on this machine's cores.",
+        "",
+        *avx2_table(document),
+        "",
+    ]
+
+
 def _load_warning(document):
     """A paragraph when other work kept every core busy during the run."""
     load = document["load_average"]
@@ -168,6 +207,7 @@ def markdown(document):
         "",
         *thread_table(document),
         "",
+        *_avx2_section(document),
         "## Build",
         "",
         "Time: add the mesh, build, trace one ray (Embree builds on the first query), after "

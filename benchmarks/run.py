@@ -29,6 +29,12 @@ meshes, where one call still takes 50 ms or more):
     former benchmark's wrapper (``benchmarks.anchors.open3d_closest``).
 * per core: the closest-hit sets again in a subprocess with ``NUMBA_NUM_THREADS=1``, against
   serial embreex and single-thread Open3D.
+* with AVX2 only: on a machine whose kernels are compiled for x86-64-v4 (AVX-512), the
+  closest-hit and shadow sets again in a subprocess whose kernels are compiled for x86-64-v3
+  (``raycore._target``), against Open3D there, both on every core: how the two compare on a CPU
+  without AVX-512.  Open3D 0.20's Embree has no AVX-512 kernels (no ``embree::avx512`` code in
+  its library, and ``perf`` samples its traversal's hot loop on 256-bit registers on a Zen 5), so
+  on such a machine only raycore's kernels differ.
 
 Results go to benchmarks/results/bench.json and bench.md (``benchmarks.report``).  Run with
 ``make bench`` or ``python -m benchmarks.run [--quick] [--no-large] [--meshes NAME ...]``; the
@@ -62,6 +68,7 @@ from benchmarks.rays import (
 
 # best_time is imported from here by benchmarks.speed_accuracy
 from benchmarks.timing import best_time, interleaved_best_times  # noqa: F401
+from raycore._target import LEVELS, level_settings
 
 RESULTS = Path(__file__).resolve().parent / "results"
 #: The checkout, where the benchmark's subprocesses (``python -m benchmarks...``) run, so that
@@ -84,6 +91,9 @@ FORMER_SETS = ("camera", "random")
 MEMORY_MIN_TRIANGLES = 1_000_000
 #: Shadow rays on which each candidate light is tried (``benchmarks.rays.half_shadow_light``)
 SHADOW_SAMPLE = 4096
+#: The benchmark's runs: the main one, and those of its subprocesses (:func:`variant_run`): one
+#: thread, and kernels compiled for x86-64-v3 (AVX2).
+FULL, ONE_THREAD, AVX2 = "full", "one-thread", "avx2"
 
 
 def with_threads(count, function):
@@ -211,15 +221,18 @@ def time_set(calls, rounds, rays):
             "mrays_s": {name: rays / s / 1e6 for name, s in seconds.items()}}, results
 
 
-def closest_calls(rays, scenes, tensor, former, one_thread_only=False):
+def closest_calls(rays, scenes, tensor, former, variant=FULL):
     """Timed calls of a closest-hit set: name -> function of no arguments.
 
     ``rays`` are float32 (origins, directions), ``tensor`` the same rays for Open3D."""
     (o32, d32), (o64, d64) = rays, (rays[0].astype(np.float64), rays[1].astype(np.float64))
-    if one_thread_only:  # the subprocess with NUMBA_NUM_THREADS=1
+    if variant == ONE_THREAD:  # the subprocess with NUMBA_NUM_THREADS=1
         return {"raycore-float32": partial(scenes["raycore-float32"].intersect, o32, d32),
                 "embreex": partial(scenes["embreex"].run, o32, d32, output=1),
                 "open3d-1-thread": partial(scenes["open3d"].cast_rays, tensor, nthreads=1)}
+    if variant == AVX2:
+        return {"raycore-float32": partial(scenes["raycore-float32"].intersect, o32, d32),
+                "open3d": partial(scenes["open3d"].cast_rays, tensor)}
     calls = {
         "raycore-float32": partial(scenes["raycore-float32"].intersect, o32, d32),
         "raycore-float64": partial(scenes["raycore-float64"].intersect, o64, d64),
@@ -234,30 +247,35 @@ def closest_calls(rays, scenes, tensor, former, one_thread_only=False):
     return calls
 
 
-def bench_queries(sets, scenes, rounds, one_thread_only=False):
-    """Timings of every query on every ray set of one mesh."""
+def bench_queries(sets, scenes, rounds, variant=FULL):
+    """Timings of the queries of ``variant`` (every query in the main run) on the ray sets of
+    one mesh."""
     rows = {}
     for name in CLOSEST_SETS:
         tensor = contenders.open3d_rays(*sets[name])
-        calls = closest_calls(sets[name], scenes, tensor, name in FORMER_SETS, one_thread_only)
+        calls = closest_calls(sets[name], scenes, tensor, name in FORMER_SETS, variant)
         row, results = time_set(calls, rounds, len(sets[name][0]))
         row["hit_fraction"] = {n: hit_fraction(n, r) for n, r in results.items()
                                if n != "open3d-former-wrapper"}
         rows[name] = row
-    if one_thread_only:
+    if variant == ONE_THREAD:
         return rows
 
     o32, d32 = sets["shadow"]
-    o64, d64 = o32.astype(np.float64), d32.astype(np.float64)
     tensor = contenders.open3d_rays(o32, d32)
     calls = {
         "raycore-float32": partial(scenes["raycore-float32"].occluded, o32, d32, 0.0, 1.0),
-        "raycore-float64": partial(scenes["raycore-float64"].occluded, o64, d64, 0.0, 1.0),
         "open3d": partial(scenes["open3d"].test_occlusions, tensor, 0.0, 1.0),
     }
+    if variant == FULL:
+        calls["raycore-float64"] = partial(scenes["raycore-float64"].occluded,
+                                           o32.astype(np.float64), d32.astype(np.float64), 0.0,
+                                           1.0)
     row, results = time_set(calls, rounds, len(o32))
     row["hit_fraction"] = {n: hit_fraction(n, r) for n, r in results.items()}
     rows["shadow"] = row
+    if variant == AVX2:
+        return rows
 
     o32, d32 = sets["random"]
     o64, d64 = o32.astype(np.float64), d32.astype(np.float64)
@@ -282,12 +300,12 @@ def bench_queries(sets, scenes, rounds, one_thread_only=False):
     return rows
 
 
-def bench_mesh(name, quick, rounds, one_thread_only=False):
-    """Every measurement of one mesh (see the module doc)."""
+def bench_mesh(name, quick, rounds, variant=FULL):
+    """The measurements of ``variant`` (see the module doc) on one mesh."""
     vertices, faces = meshes.load(name)
     size = "quick" if quick else "large" if len(faces) >= LARGE else "small"
     load_average = os.getloadavg()[0]
-    if one_thread_only:
+    if variant != FULL:
         scenes = {
             "raycore-float32": contenders.raycore_build(
                 contenders.raycore_mesh(vertices, faces, np.float32), np.float32),
@@ -296,12 +314,12 @@ def bench_mesh(name, quick, rounds, one_thread_only=False):
     else:
         build_seconds, scenes = build_all(vertices, faces, BUILD_ROUNDS[size])
     sets, notes = ray_sets(vertices, faces, scenes["open3d"], RAY_COUNTS[size])
-    rows = bench_queries(sets, scenes, rounds, one_thread_only)
+    rows = bench_queries(sets, scenes, rounds, variant)
     for ray_set, row in rows.items():
         row["ray_set"] = notes["random" if ray_set in ("count", "intersect_all") else ray_set]
     result = {"mesh": name, "triangles": int(len(faces)), "queries": rows,
               "load_average_at_start": load_average}
-    if not one_thread_only:
+    if variant == FULL:
         result["build_seconds"] = build_seconds
         result["tree_bytes"] = {dtype: scenes[f"raycore-{dtype}"].stats()["bytes"]
                                 for dtype in ("float32", "float64")}
@@ -310,15 +328,23 @@ def bench_mesh(name, quick, rounds, one_thread_only=False):
     return result
 
 
-def one_thread_run(names, quick, rounds):
-    """The per-core measurements, run in a subprocess with ``NUMBA_NUM_THREADS=1``."""
+def variant_run(variant, names, quick, rounds):
+    """The measurements of ``variant`` (ONE_THREAD or AVX2), run in a subprocess: with
+    ``NUMBA_NUM_THREADS=1``, or with kernels compiled for x86-64-v3."""
+    settings = ({"NUMBA_NUM_THREADS": "1"} if variant == ONE_THREAD
+                else level_settings(LEVELS[-1]))
     with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "one-thread.json"
-        command = [sys.executable, "-m", "benchmarks.run", "--one-thread-output", str(path),
-                   "--rounds", str(rounds), "--meshes", *names] + ["--quick"] * quick
-        subprocess.run(command, check=True, cwd=CHECKOUT,
-                       env={**os.environ, "NUMBA_NUM_THREADS": "1"})
+        path = Path(folder) / f"{variant}.json"
+        command = [sys.executable, "-m", "benchmarks.run", "--variant-output", variant,
+                   str(path), "--rounds", str(rounds), "--meshes", *names] + ["--quick"] * quick
+        subprocess.run(command, check=True, cwd=CHECKOUT, env={**os.environ, **settings})
         return json.loads(path.read_text())
+
+
+def compiled_for_avx512():
+    """Whether this process's kernels are compiled for x86-64-v4 (raycore chose it, as it does
+    on a machine that runs it), so that an AVX2 run measures something else."""
+    return os.environ.get("NUMBA_CPU_NAME") == LEVELS[0].name
 
 
 def machine():
@@ -349,7 +375,9 @@ def parser():
                         help="measure only these meshes (names from benchmarks.meshes)")
     parser.add_argument("--out", type=Path, help="folder for bench.json and bench.md (default: "
                         "benchmarks/results/; with --quick, a temporary folder)")
-    parser.add_argument("--one-thread-output", type=Path, help=argparse.SUPPRESS)
+    # a subprocess's run (variant_run): which, and where its results go
+    parser.add_argument("--variant-output", nargs=2, metavar=("VARIANT", "PATH"),
+                        help=argparse.SUPPRESS)
     return parser
 
 
@@ -372,12 +400,13 @@ def main(argv=None, progress=_no_progress):
     start, load_at_start = time.perf_counter(), os.getloadavg()[0]
     names = args.meshes or meshes.benchmark_meshes(args.quick, large=not args.no_large)
 
-    if args.one_thread_output:
+    if args.variant_output:
+        variant, path = args.variant_output
         first_builds()
-        results = [bench_mesh(name, args.quick, args.rounds, one_thread_only=True)
-                   for name in names]
-        args.one_thread_output.write_text(json.dumps(
-            {"numba_threads": numba.get_num_threads(), "meshes": results}))
+        results = [bench_mesh(name, args.quick, args.rounds, variant) for name in names]
+        Path(path).write_text(json.dumps(
+            {"numba_threads": numba.get_num_threads(),
+             "cpu_name": os.environ.get("NUMBA_CPU_NAME"), "meshes": results}))
         return
 
     with progress("first builds"):
@@ -389,9 +418,13 @@ def main(argv=None, progress=_no_progress):
             print(report.mesh_summary(results[-1]), flush=True)
             advance()
     with progress("one thread, in a subprocess"):
-        one_thread = one_thread_run(names, args.quick, args.rounds)
+        one_thread = variant_run(ONE_THREAD, names, args.quick, args.rounds)
+    avx2 = None
+    if compiled_for_avx512():
+        with progress("AVX2 kernels, in a subprocess"):
+            avx2 = variant_run(AVX2, names, args.quick, args.rounds)
     document = {"machine": machine(), "first_build_seconds": first, "rounds": args.rounds,
-                "meshes": results, "one_thread": one_thread,
+                "meshes": results, "one_thread": one_thread, "avx2": avx2,
                 "duration_seconds": time.perf_counter() - start,
                 "load_average": {"start": load_at_start, "end": os.getloadavg()[0]}}
     out = args.out or (Path(tempfile.mkdtemp(prefix="raycore-bench-")) if args.quick

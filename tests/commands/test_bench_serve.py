@@ -20,7 +20,7 @@ def _subparser(name):
 def test_bench_offers_the_benchmarks_options():
     from benchmarks import run
 
-    hidden = {"--one-thread-output"}  # its own subprocess's
+    hidden = {"--variant-output"}  # its own subprocesses'
     assert _options(_subparser("bench")) == _options(run.parser()) - hidden
 
 
