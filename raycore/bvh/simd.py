@@ -5,9 +5,12 @@ a wide node's eight child boxes is written as a Numba intrinsic over ``<8 x floa
 for rays of either precision: eight boxes cost about as much as one scalar box test.
 """
 
+import platform
+
 import numpy as np
+from llvmlite import binding as llvm
 from llvmlite import ir
-from numba import types
+from numba import config, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 from numba.np.numpy_support import as_dtype
@@ -44,6 +47,38 @@ def _splat(builder, vector, value):
                                  ir.Constant(ir.IntType(32), 0))
     return builder.shuffle_vector(one, ir.Constant(vector, ir.Undefined),
                                   ir.Constant(ir.VectorType(ir.IntType(32), lanes), [0] * lanes))
+
+
+def _avx2_without_avx512():
+    """Whether the kernels are compiled for x86-64 with AVX2 but not AVX-512 (x86-64-v3, or such
+    a host): Numba's target features, or the host's where Numba compiles for the host."""
+    if platform.machine().lower() not in ("x86_64", "amd64"):
+        return False
+    features = config.CPU_FEATURES or llvm.get_host_cpu_features().flatten()
+    return "+avx2" in features and "+avx512vl" not in features
+
+
+def _lane_bits(builder, mask):
+    """The lanes set in ``mask`` (an <L x i1> from a comparison of 256-bit float vectors) as the
+    low L bits of an int64.
+
+    With AVX2 (no mask registers), by the movmsk instruction of the compared vectors' width,
+    written as its intrinsic: from a plain bitcast, LLVM merged two masks that the caller then
+    combines (a block's candidates and its lanes to settle exactly) into one 16-bit mask, by
+    packing, shuffling and shifting them, seven instructions where two do.  With AVX-512 the
+    bitcast is a move from a mask register.
+    """
+    int64 = ir.IntType(64)
+    lanes = mask.type.count
+    if not _avx2_without_avx512():
+        return builder.zext(builder.bitcast(mask, ir.IntType(lanes)), int64)
+    width = 256 // lanes
+    integers = builder.sext(mask, ir.VectorType(ir.IntType(width), lanes))
+    floats = ir.VectorType(ir.FloatType() if width == 32 else ir.DoubleType(), lanes)
+    name = "llvm.x86.avx.movmsk.ps.256" if width == 32 else "llvm.x86.avx.movmsk.pd.256"
+    movmsk = cgutils.get_or_insert_function(builder.module,
+                                            ir.FunctionType(ir.IntType(32), [floats]), name)
+    return builder.zext(builder.call(movmsk, [builder.bitcast(integers, floats)]), int64)
 
 
 @intrinsic
@@ -358,16 +393,17 @@ def watertight_block(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, s
                                 builder.fcmp_ordered("<=", t_det, builder.fmul(hi, det)))
         candidate = builder.and_(builder.and_(inside, in_range),
                                  builder.fcmp_ordered("!=", det, zero))
-        candidate = builder.and_(candidate, builder.not_(exact))
-        bits = ir.IntType(lanes)
-        exact_bits = builder.zext(builder.bitcast(exact, bits), int64)
+        # lanes to settle exactly are not candidates
+        exact_bits = _lane_bits(builder, exact)
+        candidate_bits = builder.and_(_lane_bits(builder, candidate), builder.not_(exact_bits))
         # Most blocks hit nothing: the three divisions wait until a lane is a candidate.
         before = builder.basic_block
-        with builder.if_then(builder.icmp_unsigned("!=", builder.bitcast(candidate, bits),
-                                                   ir.Constant(bits, 0)), likely=False):
+        with builder.if_then(builder.icmp_unsigned("!=", candidate_bits, ir.Constant(int64, 0)),
+                             likely=False):
             t = builder.fdiv(t_det, det)
             # t is not NaN (inf / inf when the edge functions overflow)
-            hit = builder.and_(candidate, builder.fcmp_ordered("==", t, t))
+            found = builder.and_(candidate_bits,
+                                 _lane_bits(builder, builder.fcmp_ordered("==", t, t)))
             # t/det can round one ulp past a bound that the product test accepted: clamp
             t = builder.select(builder.fcmp_ordered("<", t, lo), lo, t)
             t = builder.select(builder.fcmp_ordered(">", t, hi), hi, t)
@@ -375,7 +411,6 @@ def watertight_block(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, s
             store = builder.bitcast(result.data, vector.as_pointer())
             for k, value in enumerate((t, builder.fdiv(v_b, det), builder.fdiv(w_c, det))):
                 builder.store(value, builder.gep(store, [ir.Constant(int64, k)]), align=1)
-            found = builder.zext(builder.bitcast(hit, bits), int64)
             tested = builder.basic_block
         hit_bits = builder.phi(int64)
         hit_bits.add_incoming(ir.Constant(int64, 0), before)
