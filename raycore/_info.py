@@ -6,6 +6,7 @@ from numba import config
 from numba.core.caching import FunctionCache
 
 from raycore import _threading
+from raycore._target import compiled_features
 
 #: Feature names of vector instruction sets, as LLVM spells them (x86, Arm, POWER).
 _SIMD_PREFIXES = ("sse", "ssse", "avx", "fma", "f16c", "neon", "sve", "altivec", "vsx")
@@ -58,8 +59,4 @@ def info():
 
 def simd_features():
     """Sorted names of the vector instruction sets the kernels are compiled with."""
-    if config.CPU_FEATURES is not None:  # NUMBA_CPU_FEATURES, e.g. "+avx2,+fma,-avx512f"
-        enabled = [f[1:] for f in config.CPU_FEATURES.split(",") if f.startswith("+")]
-    else:
-        enabled = [name for name, on in llvm.get_host_cpu_features().items() if on]
-    return sorted(name for name in enabled if name.startswith(_SIMD_PREFIXES))
+    return sorted(name for name in compiled_features() if name.startswith(_SIMD_PREFIXES))

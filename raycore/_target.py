@@ -65,6 +65,15 @@ def runnable_levels():
             if all(host.get(feature[1:], False) for feature in level.features.split(","))]
 
 
+def compiled_features():
+    """Names of the CPU features the kernels are compiled with, as LLVM spells them
+    (``avx2``, ``avx512vl``, ...): ``NUMBA_CPU_FEATURES``'s (a level's, where raycore chose
+    one), else this machine's, which Numba then compiles for."""
+    if config.CPU_FEATURES is not None:  # e.g. "+avx2,+fma,-avx512f"
+        return {f[1:] for f in config.CPU_FEATURES.split(",") if f.startswith("+")}
+    return {name for name, on in llvm.get_host_cpu_features().items() if on}
+
+
 #: Numba's settings of the CPU it compiles for.
 CPU_SETTINGS = ("NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES")
 

@@ -5,16 +5,14 @@ a wide node's eight child boxes is written as a Numba intrinsic over ``<8 x floa
 for rays of either precision: eight boxes cost about as much as one scalar box test.
 """
 
-import platform
-
 import numpy as np
-from llvmlite import binding as llvm
 from llvmlite import ir
-from numba import config, types
+from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 from numba.np.numpy_support import as_dtype
 
+from raycore._target import compiled_features
 from raycore.bvh.layout import NODE_WIDTH, WIDTH
 
 #: Bytes of a wide node's row (:mod:`raycore.bvh.layout`): NODE_WIDTH float32 or int32.
@@ -49,15 +47,6 @@ def _splat(builder, vector, value):
                                   ir.Constant(ir.VectorType(ir.IntType(32), lanes), [0] * lanes))
 
 
-def _avx2_without_avx512():
-    """Whether the kernels are compiled for x86-64 with AVX2 but not AVX-512 (x86-64-v3, or such
-    a host): Numba's target features, or the host's where Numba compiles for the host."""
-    if platform.machine().lower() not in ("x86_64", "amd64"):
-        return False
-    features = config.CPU_FEATURES or llvm.get_host_cpu_features().flatten()
-    return "+avx2" in features and "+avx512vl" not in features
-
-
 def _lane_bits(builder, mask):
     """The lanes set in ``mask`` (an <L x i1> from a comparison of 256-bit float vectors) as the
     low L bits of an int64.
@@ -70,7 +59,8 @@ def _lane_bits(builder, mask):
     """
     int64 = ir.IntType(64)
     lanes = mask.type.count
-    if not _avx2_without_avx512():
+    features = compiled_features()
+    if "avx2" not in features or "avx512vl" in features:
         return builder.zext(builder.bitcast(mask, ir.IntType(lanes)), int64)
     width = 256 // lanes
     integers = builder.sext(mask, ir.VectorType(ir.IntType(width), lanes))
