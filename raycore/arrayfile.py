@@ -21,7 +21,9 @@ boundaries, so that a memory map gives aligned views that compiled kernels take 
 Format version 1 gave each array its own CRC-32s, in an entry of named fields; it is still read.
 Version 2 checks the data as one piece, and its entries are lists: a small scene's load spent
 more time on a header entry and a checksum call per array than on its arrays (20 arrays:
-66 -> 47 us to parse the file of a 968-triangle scene, suzanne).
+66 -> 47 us to parse the file of a 968-triangle scene, suzanne).  Version 3 is version 2's
+layout with fewer arrays in a scene file (:mod:`raycore.scene_file`: one object table, no empty
+tables), which a reader of version 2 would take for a corrupt one.
 """
 
 import json
@@ -41,7 +43,7 @@ from raycore.rays import flag
 MAGIC = b"\x89RAYCORE"
 #: Version of this layout and of what :mod:`raycore.scene_file` puts in it; a reader refuses a
 #: newer one.
-VERSION = 2
+VERSION = 3
 ALIGN = 64
 #: Arrays are checksummed in pieces of this many bytes (the file records a CRC-32 for each).
 #: zlib-ng computes the standard CRC-32 that zlib does, with carry-less multiplication: 32 GB/s

@@ -30,6 +30,8 @@ LAYOUT = {"node_width": NODE_WIDTH, "block_vector_bytes": VECTOR_BYTES,
 _ANALYTIC_KINDS = (analytic.SPHERE, analytic.PLANE, analytic.DISK, analytic.BOX,
                    analytic.TRANSFORMED_BOX, analytic.CYLINDER, analytic.CONE)
 _TREE_STATS = ("depth", "node_count", "leaf_count", "sah_cost")
+#: The object table's columns: the lists that Scene keeps by these names (``_kind``, ...).
+OBJECT_COLUMNS = ("kind", "param_row", "mesh_of", "xform_row", "visible")
 
 
 def _tree(bvh, prefix, arrays):
@@ -49,12 +51,9 @@ def contents(scene, extra=None):
     """
     scene._scene()
     placed = sorted(scene._placement)
-    arrays = {
-        "kind": np.array(scene._kind, np.int64),
-        "param_row": np.array(scene._param_row, np.int64),
-        "mesh_of": np.array(scene._mesh_of, np.int64),
-        "xform_row": np.array(scene._xform_row, np.int64),
-        "visible": np.array(scene._visible, bool),
+    columns = [getattr(scene, f"_{column}") for column in OBJECT_COLUMNS]
+    arrays = {"objects": np.array(columns, np.int64).T.copy()}
+    optional = {
         "params": np.array(scene._params, np.float64).reshape(-1, analytic.PARAM_WIDTH),
         "xforms": np.array(scene._xforms, np.float64).reshape(-1, 3, 4),
         "placement.objects": np.array(placed, np.int64),
@@ -65,6 +64,8 @@ def contents(scene, extra=None):
         "top.slots": scene._top_slots,
         "top.direct": scene._direct,
     }
+    # an empty table is left out (a small scene's load spent a microsecond on each array)
+    arrays.update({name: array for name, array in optional.items() if len(array)})
     meshes = []
     for i, mesh in enumerate(scene._meshes):
         arrays[f"mesh{i}.vertices"] = mesh.vertices
@@ -122,10 +123,26 @@ def _loaded(source, mmap):
 
 
 def _taker(arrays):
-    """``take(name, dtype, shape)``: the file's array ``name``, checked
-    (:func:`raycore.arrayfile.checked`)."""
-    return lambda name, dtype, shape: arrayfile.checked(arrays, name, dtype, shape,
-                                                        "the scene file")
+    """``take(name, dtype, shape, may_be_absent=False)``: the file's array ``name``, checked
+    (:func:`raycore.arrayfile.checked`); an empty one where ``may_be_absent`` and the file left
+    it out (:func:`contents` leaves out empty tables)."""
+    def take(name, dtype, shape, may_be_absent=False):
+        if may_be_absent and shape[0] in (None, 0) and name not in arrays:
+            return np.empty((0, *shape[1:]), dtype)
+        return arrayfile.checked(arrays, name, dtype, shape, "the scene file")
+    return take
+
+
+def _objects(take, arrays):
+    """The object table, (n, 5) int64: kind, parameter row, mesh, transform row, visible.
+
+    Files of format versions 1 and 2 kept its columns as arrays of their own: these are joined.
+    """
+    if "objects" in arrays or "kind" not in arrays:
+        return take("objects", np.int64, (None, len(OBJECT_COLUMNS)))
+    kind = take("kind", np.int64, (None,))
+    columns = [kind] + [take(name, np.int64, (len(kind),)) for name in OBJECT_COLUMNS[1:-1]]
+    return np.stack(columns + [take("visible", bool, (len(kind),))], axis=1)  # int64
 
 
 def _bvh(take, prefix, stats, order_length):
@@ -143,23 +160,19 @@ def _restore(Scene, meta, arrays):
     scene = Scene(meta["dtype"], **meta["build"])
     dtype = scene.dtype
     take = _taker(arrays)
-    kind = take("kind", np.int64, (None,))
-    n = len(kind)
-    param_row = take("param_row", np.int64, (n,))
-    mesh_of = take("mesh_of", np.int64, (n,))
-    xform_row = take("xform_row", np.int64, (n,))
-    visible = take("visible", bool, (n,))
-    params = take("params", np.float64, (None, analytic.PARAM_WIDTH))
-    xforms = take("xforms", np.float64, (None, 3, 4))
-    placed = take("placement.objects", np.int64, (None,))
-    matrices = take("placement.matrices", np.float64, (len(placed), 4, 4))
-    bounds = take("placement.bounds", np.float64, (len(placed), 2, 3))
-    top_slots = take("top.slots", np.int64, (None,))
-    direct = take("top.direct", np.int64, (None,))
+    objects = _objects(take, arrays)
+    n = len(objects)
+    params = take("params", np.float64, (None, analytic.PARAM_WIDTH), True)
+    xforms = take("xforms", np.float64, (None, 3, 4), True)
+    placed = take("placement.objects", np.int64, (None,), True)
+    matrices = take("placement.matrices", np.float64, (len(placed), 4, 4), True)
+    bounds = take("placement.bounds", np.float64, (len(placed), 2, 3), True)
+    top_slots = take("top.slots", np.int64, (None,), True)
+    direct = take("top.direct", np.int64, (None,), True)
     sizes = {"objects": n, "meshes": len(meta["meshes"]), "params": len(params),
              "xforms": len(xforms)}
-    problem = _object_problem(kind, param_row, mesh_of, xform_row, sizes["params"],
-                              sizes["xforms"], sizes["meshes"], placed, top_slots, direct)
+    problem = _object_problem(objects, sizes["params"], sizes["xforms"], sizes["meshes"], placed,
+                              top_slots, direct)
     if problem:
         what = _OBJECT_PROBLEMS[problem].format(**sizes)
         raise ValueError(f"the scene file is corrupt ({what})")
@@ -186,9 +199,9 @@ def _restore(Scene, meta, arrays):
     elif len(top_slots):
         raise ValueError("the scene file is corrupt (top-tree objects without a top tree)")
 
-    scene._kind, scene._param_row = kind.tolist(), param_row.tolist()
-    scene._mesh_of, scene._xform_row = mesh_of.tolist(), xform_row.tolist()
-    scene._visible = visible.tolist()
+    scene._kind, scene._param_row, scene._mesh_of, scene._xform_row, visible = \
+        objects.T.tolist()
+    scene._visible = list(map(bool, visible))
     scene._params, scene._xforms = _rows(params), _rows(xforms)
     scene._placement = {obj: (matrices[i], (bounds[i, 0], bounds[i, 1]))
                         for i, obj in enumerate(placed.tolist())}
@@ -220,43 +233,48 @@ _OBJECT_PROBLEMS = {
     6: "placed objects outside [0, {objects})",
     7: "the top tree's objects outside [0, {objects})",
     8: "directly tested objects outside [0, {objects})",
+    9: "visibility flags other than 0 and 1",
 }
 
 
 @njit(cache=True)
-def _object_problem(kind, param_row, mesh_of, xform_row, param_rows, xform_rows, mesh_count,
-                    placed, top_slots, direct):
+def _object_problem(objects, param_rows, xform_rows, mesh_count, placed, top_slots, direct):
     """0, or the key in _OBJECT_PROBLEMS of the first problem found with the object tables, in
     one pass over them (NumPy took a dozen calls, 0.1 ms of a small scene's load).
 
     Parameters
     ----------
-    kind, param_row, mesh_of, xform_row : ndarray of int64, shape (n,)
-        Per object, as :class:`raycore.Scene` keeps them: a mesh has a mesh, maybe a transform
-        row (-1: none) and no parameter row (-1); an analytic shape a parameter row only.
+    objects : ndarray of int64, shape (n, 5)
+        Per object, the :data:`OBJECT_COLUMNS` as :class:`raycore.Scene` keeps them: a mesh has
+        a mesh, maybe a transform row (-1: none) and no parameter row (-1); an analytic shape a
+        parameter row only; visible is 0 or 1.
     param_rows, xform_rows, mesh_count : int
         Rows of the parameter and transform tables, and meshes.
     placed, top_slots, direct : ndarray of int64
         Object indices: of the instances placed, in the top tree's slots, tested directly.
     """
-    n = len(kind)
+    n = len(objects)
     for i in range(n):
-        if kind[i] == MESH:
-            if mesh_of[i] < 0 or mesh_of[i] >= mesh_count:
+        row = objects[i]
+        kind, param_row, mesh_of, xform_row, visible = row[0], row[1], row[2], row[3], row[4]
+        if visible != 0 and visible != 1:
+            return 9
+        if kind == MESH:
+            if mesh_of < 0 or mesh_of >= mesh_count:
                 return 2
-            if xform_row[i] < -1 or xform_row[i] >= xform_rows:
+            if xform_row < -1 or xform_row >= xform_rows:
                 return 4
-            if param_row[i] != -1:
+            if param_row != -1:
                 return 5
             continue
         known = False
         for analytic_kind in _ANALYTIC_KINDS:
-            known |= kind[i] == analytic_kind
+            known |= kind == analytic_kind
         if not known:
             return 1
-        if param_row[i] < 0 or param_row[i] >= param_rows:
+        if param_row < 0 or param_row >= param_rows:
             return 3
-        if mesh_of[i] != -1 or xform_row[i] != -1:
+        if mesh_of != -1 or xform_row != -1:
             return 5
     if indices_outside(placed, n):
         return 6

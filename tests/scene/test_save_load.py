@@ -117,7 +117,7 @@ def test_truncated_file_is_refused(saved, tmp_path, keep):
         Scene.load(bad)
 
 
-@pytest.mark.parametrize("name", ["kind", "params", "xforms", "top.nodes", "mesh0.nodes",
+@pytest.mark.parametrize("name", ["objects", "params", "xforms", "top.nodes", "mesh0.nodes",
                                   "mesh0.blocks", "mesh3.faces"])
 def test_flipped_bit_in_any_array_is_refused(saved, tmp_path, name):
     _, _, path, _ = saved
@@ -162,17 +162,20 @@ def test_flipped_bit_is_found_in_its_chunk(tmp_path, monkeypatch):
         arrayfile.read(tampered(path, tmp_path, flip))
 
 
-def test_format_version_1_files_are_still_read(tmp_path):
-    """A file that raycore wrote in format version 1 (before the data was checked as one
-    piece), of the 37-object scene of every kind in float32, answers as that scene does when
-    built now: t, occlusion and counts, which do not depend on the tree's shape.  Its arrays'
-    own checksums still find a flipped bit."""
-    path = Path(__file__).parent / "data" / "every-kind-v1.rcs"
-    assert struct.unpack_from("<I", path.read_bytes(), 8) == (1,)
+@pytest.mark.parametrize("version", [1, 2])
+def test_files_of_earlier_format_versions_are_still_read(tmp_path, version):
+    """Files that raycore wrote in format versions 1 (before the data was checked as one piece)
+    and 2 (before the object table was one array and empty tables were left out), of the
+    37-object scene of every kind in float32, answer as that scene does when built now: t,
+    occlusion and counts, which do not depend on the tree's shape.  Version 1's arrays' own
+    checksums still find a flipped bit."""
+    path = Path(__file__).parent / "data" / f"every-kind-v{version}.rcs"
+    assert struct.unpack_from("<I", path.read_bytes(), 8) == (version,)
     spec, _ = random_scene(3)
     built = spec.scene("float32", max_leaf_size=6, bins=12)
     loaded = Scene.load(path)
     assert len(loaded) == len(built) and loaded.build_params == built.build_params
+    assert loaded._visible == built._visible and loaded._kind == built._kind
     origins, directions, tmin, tmax, _ = scene_rays(3)
     np.testing.assert_array_equal(loaded.intersect(origins, directions, tmin, tmax).t,
                                   built.intersect(origins, directions, tmin, tmax).t)
@@ -180,6 +183,8 @@ def test_format_version_1_files_are_still_read(tmp_path):
                                   built.occluded(origins, directions, tmin, tmax))
     np.testing.assert_array_equal(loaded.count(origins, directions, tmin, tmax),
                                   built.count(origins, directions, tmin, tmax))
+    if version > 1:
+        return
 
     def flip(data):
         info = header(data)
@@ -307,18 +312,20 @@ CRAFTED = {
     "leaf past the mesh's blocks": leaf_past_blocks,
     "top-tree leaf past its objects": top_leaf_past_slots,
     "unused slot that rays can enter": unused_slot_entered,
-    "unknown object kind": lambda m, a: a["kind"].__setitem__(0, 99),
-    "mesh reference out of range": lambda m, a: a["mesh_of"].__setitem__(
-        int(np.flatnonzero(a["kind"] == 16)[0]), 999),
-    "parameter row out of range": lambda m, a: a["param_row"].__setitem__(0, 10**6),
-    "transform row out of range": lambda m, a: a["xform_row"].__setitem__(
-        int(np.flatnonzero(a["xform_row"] >= 0)[0]), 10**6),
+    "unknown object kind": lambda m, a: a["objects"].__setitem__((0, 0), 99),
+    "mesh reference out of range": lambda m, a: a["objects"].__setitem__(
+        (int(np.flatnonzero(a["objects"][:, 0] == 16)[0]), 2), 999),
+    "parameter row out of range": lambda m, a: a["objects"].__setitem__((0, 1), 10**6),
+    "transform row out of range": lambda m, a: a["objects"].__setitem__(
+        (int(np.flatnonzero(a["objects"][:, 3] >= 0)[0]), 3), 10**6),
+    "visibility flag other than 0 and 1": lambda m, a: a["objects"].__setitem__((0, 4), 2),
     "face index out of range": lambda m, a: a["mesh0.faces"].__setitem__((0, 0), 10**6),
     "slot face out of range": lambda m, a: face_ints(a["mesh0.blocks"]).__setitem__(
         (0, FACE_COLUMN), 10**6),
     "direct object out of range": lambda m, a: a["top.direct"].__setitem__(0, 10**6),
+    "missing table": lambda m, a: a.pop("params"),
     "missing array": lambda m, a: a.pop("mesh2.blocks"),
-    "wrong dtype": lambda m, a: a.__setitem__("kind", a["kind"].astype(np.int32)),
+    "wrong dtype": lambda m, a: a.__setitem__("objects", a["objects"].astype(np.int32)),
     "wrong shape": lambda m, a: a.__setitem__("mesh1.blocks", a["mesh1.blocks"][:, :5].copy()),
     "other layout": lambda m, a: m["layout"].__setitem__("node_width", 32),
     "missing meta": lambda m, a: m.pop("meshes"),
@@ -403,3 +410,4 @@ def test_loading_compiles_one_mesh_check_for_every_mesh(tmp_path):
             scene.save(tmp_path / "one.rcs")
             Scene.load(tmp_path / "one.rcs")
     assert len(scene_file._mesh_problem.signatures) == 1
+    assert len(scene_file._object_problem.signatures) == 1
