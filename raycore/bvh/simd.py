@@ -47,6 +47,59 @@ def _splat(builder, vector, value):
                                   ir.Constant(ir.VectorType(ir.IntType(32), lanes), [0] * lanes))
 
 
+def _avx2_without_avx512():
+    """Whether the kernels are compiled for AVX2 without AVX-512 (16 vector registers, no mask
+    registers), where some choices and masks are written for the instructions they need."""
+    features = compiled_features()
+    return "avx2" in features and "avx512vl" not in features
+
+
+def _components(context, builder, scalar, axes, values):
+    """Components ``axes`` (each an integer 0, 1 or 2) of the triple ``values`` (floats of LLVM
+    type ``scalar``), without a branch.
+
+    A float has no conditional move: with AVX2, LLVM compiled each three-way choice of one as
+    two branches, on a ray's axes, which random rays take at random.  With AVX2 they are
+    permuted in a register instead (``vpermps``, whose indices are a vector: a float64 is two of
+    its words); read from a vector by a variable index, through memory, they made framed
+    camera rays 8-11 % slower.  Elsewhere the choices stay selects (AVX-512's masked moves).
+    """
+    if not _avx2_without_avx512():
+        def pick(k):
+            is0 = builder.icmp_signed("==", k, ir.Constant(k.type, 0))
+            is1 = builder.icmp_signed("==", k, ir.Constant(k.type, 1))
+            return builder.select(is0, values[0], builder.select(is1, values[1], values[2]))
+        return [pick(k) for k in axes]
+    i32, f32 = ir.IntType(32), ir.FloatType()
+    words = scalar.get_abi_size(context.target_data) // 4  # float32 words in a value
+    octet = ir.VectorType(f32, 8)
+    data = ir.Constant(octet, ir.Undefined)  # value i in words [words * i, words * (i + 1))
+    for i, value in enumerate(values):
+        parts = builder.bitcast(value, ir.VectorType(f32, words))
+        for word in range(words):
+            data = builder.insert_element(
+                data, builder.extract_element(parts, ir.Constant(i32, word)),
+                ir.Constant(i32, words * i + word))
+    index = ir.Constant(ir.VectorType(i32, 8), ir.Undefined)  # result j: value axes[j]'s words
+    for j, k in enumerate(axes):
+        first = builder.mul(builder.trunc(k, i32), ir.Constant(i32, words))
+        for word in range(words):
+            index = builder.insert_element(index, builder.add(first, ir.Constant(i32, word)),
+                                           ir.Constant(i32, words * j + word))
+    permute = cgutils.get_or_insert_function(
+        builder.module, ir.FunctionType(octet, [octet, index.type]), "llvm.x86.avx2.permps")
+    moved = builder.call(permute, [data, index])
+    results = []
+    for j in range(len(axes)):
+        parts = ir.Constant(ir.VectorType(f32, words), ir.Undefined)
+        for word in range(words):
+            parts = builder.insert_element(
+                parts, builder.extract_element(moved, ir.Constant(i32, words * j + word)),
+                ir.Constant(i32, word))
+        results.append(builder.bitcast(parts, scalar))
+    return results
+
+
 def _lane_bits(builder, mask):
     """The lanes set in ``mask`` (an <L x i1> from a comparison of 256-bit float vectors) as the
     low L bits of an int64.
@@ -59,8 +112,7 @@ def _lane_bits(builder, mask):
     """
     int64 = ir.IntType(64)
     lanes = mask.type.count
-    features = compiled_features()
-    if "avx2" not in features or "avx512vl" in features:
+    if not _avx2_without_avx512():
         return builder.zext(builder.bitcast(mask, ir.IntType(lanes)), int64)
     width = 256 // lanes
     integers = builder.sext(mask, ir.VectorType(ir.IntType(width), lanes))
@@ -283,6 +335,21 @@ def block_lanes(typingctx, blocks):
 
 
 @intrinsic
+def permuted(typingctx, kx, ky, kz, x, y, z):
+    """``(x, y, z)`` along axes ``kx``, ``ky``, ``kz`` (each 0, 1 or 2), without a branch
+    (:func:`_components`): a ray's direction as the watertight test permutes it
+    (:func:`raycore.primitives.triangle.watertight_setup`)."""
+    sig = types.UniTuple(x, 3)(kx, ky, kz, x, y, z)
+
+    def codegen(context, builder, signature, args):
+        scalar = context.get_value_type(signature.args[3])
+        return context.make_tuple(builder, signature.return_type,
+                                  _components(context, builder, scalar, args[:3], args[3:]))
+
+    return sig, codegen
+
+
+@intrinsic
 def watertight_block(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, sz, tmin, tmax,
                      out):
     """The watertight test (``raycore.primitives.triangle.watertight``) against the L triangles
@@ -325,27 +392,26 @@ def watertight_block(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, s
         def splat(value):
             return _splat(builder, vector, value)
 
-        def pick(k, x, y, z):
-            # component k (a per-ray axis, 0..2) of the scalar triple (x, y, z)
-            is0 = builder.icmp_signed("==", k, ir.Constant(k.type, 0))
-            is1 = builder.icmp_signed("==", k, ir.Constant(k.type, 1))
-            return builder.select(is0, x, builder.select(is1, y, z))
+        # the origin along the ray's axes (the same for every block of a ray: LLVM moves it
+        # out of the loops over blocks)
+        origin_x, origin_y, origin_z = (
+            splat(value) for value in _components(context, builder, scalar,
+                                                  (kx_v, ky_v, kz_v), (ox_v, oy_v, oz_v)))
 
-        def relative(vertex, k):
-            # axis k of a vertex's four lanes, less the origin: the permutation is an offset
-            # into the block, so the axes are loaded in the order the ray needs them
+        def relative(vertex, k, origin):
+            # axis k of a vertex's lanes, less the origin's: the permutation is an offset into
+            # the block, so the axes are loaded in the order the ray needs them
             plane = builder.gep(first, [builder.add(ir.Constant(int64, 3 * vertex),
                                                     builder.sext(k, int64))])
-            origin = splat(pick(k, ox_v, oy_v, oz_v))
             return builder.fsub(builder.load(plane, align=1), origin)
 
         shear_x, shear_y, scale = splat(sx_v), splat(sy_v), splat(sz_v)
         sheared = []
         for vertex in range(3):
             # translate by the origin, permute so that kz is forward, shear onto +z
-            along = relative(vertex, kz_v)
-            px = builder.fsub(relative(vertex, kx_v), builder.fmul(shear_x, along))
-            py = builder.fsub(relative(vertex, ky_v), builder.fmul(shear_y, along))
+            along = relative(vertex, kz_v, origin_z)
+            px = builder.fsub(relative(vertex, kx_v, origin_x), builder.fmul(shear_x, along))
+            py = builder.fsub(relative(vertex, ky_v, origin_y), builder.fmul(shear_y, along))
             sheared.append((px, py, along))
         (a_x, a_y, a_z), (b_x, b_y, b_z), (c_x, c_y, c_z) = sheared
 

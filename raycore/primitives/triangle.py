@@ -24,6 +24,7 @@ from numba import njit, prange, types
 from numba.extending import overload
 
 from raycore._fp import like
+from raycore.bvh.simd import permuted
 from raycore.hits import Hits
 from raycore.rays import as_float_array, prepare_rays, read_only, resolve_dtype
 
@@ -203,27 +204,20 @@ def watertight_setup(dx, dy, dz):
         Shear ``d[kx]/d[kz]``, ``d[ky]/d[kz]`` and scale ``1/d[kz]`` that map the ray onto +z with
         unit length.  NaN for a zero direction, which makes every :func:`watertight` test miss.
     """
-    kz = 0
-    if abs(dy) > abs(dx):
-        kz = 1
-    if abs(dz) > abs(_component(kz, dx, dy, dz)):
-        kz = 2
+    # the axes from comparisons and integer choices, the components by one permutation
+    # (simd.permuted): choices of floats were branches, taken at random on random rays
+    wx, wy, wz = abs(dx), abs(dy), abs(dz)
+    kz = 2 if (wz > wx) & (wz > wy) else (1 if wy > wx else 0)
     kx = (kz + 1) % 3
     ky = (kx + 1) % 3
-    dkz = _component(kz, dx, dy, dz)
-    if dkz < like(dx, 0):
+    backward = ((kz == 0) & (dx < 0)) | ((kz == 1) & (dy < 0)) | ((kz == 2) & (dz < 0))
+    if backward:
         kx, ky = ky, kx
+    dkx, dky, dkz = permuted(kx, ky, kz, dx, dy, dz)
     if dkz == like(dx, 0):
         nan = like(dx, np.nan)
         return kx, ky, kz, nan, nan, nan
-    return (
-        kx,
-        ky,
-        kz,
-        _component(kx, dx, dy, dz) / dkz,
-        _component(ky, dx, dy, dz) / dkz,
-        like(dx, 1) / dkz,
-    )
+    return kx, ky, kz, dkx / dkz, dky / dkz, like(dx, 1) / dkz
 
 
 def _edge_exact(px, py, qx, qy):
