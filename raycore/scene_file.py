@@ -30,7 +30,7 @@ LAYOUT = {"node_width": NODE_WIDTH, "block_vector_bytes": VECTOR_BYTES,
 _ANALYTIC_KINDS = (analytic.SPHERE, analytic.PLANE, analytic.DISK, analytic.BOX,
                    analytic.TRANSFORMED_BOX, analytic.CYLINDER, analytic.CONE)
 _TREE_STATS = ("depth", "node_count", "leaf_count", "sah_cost")
-#: The object table's columns: the lists that Scene keeps by these names (``_kind``, ...).
+#: The object table's columns: the lists that Scene keeps as ``_kind``, ``_param_row``, ...
 OBJECT_COLUMNS = ("kind", "param_row", "mesh_of", "xform_row", "visible")
 
 
@@ -51,8 +51,8 @@ def contents(scene, extra=None):
     """
     scene._scene()
     placed = sorted(scene._placement)
-    columns = [getattr(scene, f"_{column}") for column in OBJECT_COLUMNS]
-    arrays = {"objects": np.array(columns, np.int64).T.copy()}
+    columns = [scene._kind, scene._param_row, scene._mesh_of, scene._xform_row, scene._visible]
+    arrays = {"objects": np.array(columns, np.int64).T.copy()}  # (n, 5): OBJECT_COLUMNS
     optional = {
         "params": np.array(scene._params, np.float64).reshape(-1, analytic.PARAM_WIDTH),
         "xforms": np.array(scene._xforms, np.float64).reshape(-1, 3, 4),

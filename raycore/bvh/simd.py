@@ -392,8 +392,8 @@ def watertight_block(typingctx, blocks, block, ox, oy, oz, kx, ky, kz, sx, sy, s
         def splat(value):
             return _splat(builder, vector, value)
 
-        # the origin along the ray's axes (the same for every block of a ray: LLVM moves it
-        # out of the loops over blocks)
+        # the origin along the ray's axes, splatted (the same for every block of a ray: LLVM
+        # permutes it once, outside the loops over blocks, and splats it in each)
         origin_x, origin_y, origin_z = (
             splat(value) for value in _components(context, builder, scalar,
                                                   (kx_v, ky_v, kz_v), (ox_v, oy_v, oz_v)))
