@@ -11,7 +11,9 @@ parallel kernel is linked:
   and Celery's prefork pool make workers.  raycore never chooses it.
 - ``workqueue``: fork-safe, but it aborts the process when two threads run parallel loops at
   once.  Where TBB cannot load (PyPI has no tbb wheel for Linux aarch64 or macOS arm64),
-  raycore uses it and lets one parallel loop run at a time (:func:`_serialise_launches`).
+  raycore uses it and lets one parallel loop run at a time (:func:`_serialise_launches`), as it
+  does where an older libtbb was loaded first under the same name (Open3D's wheel carries one),
+  which Numba refuses: raycore then says so.
 
 A layer named in ``NUMBA_THREADING_LAYER`` is the user's choice and is kept.
 """
@@ -83,10 +85,12 @@ def choose_layer():
     str
         The layer: ``"tbb"``, ``"workqueue"`` or (only when chosen outside raycore) ``"omp"``.
     """
+    tbb_loaded = False
     if not parallel._is_initialized:
         chosen = config.THREADING_LAYER
         if chosen == "default":
-            _start("tbb" if _load_tbb() else "workqueue")
+            tbb_loaded = _load_tbb()
+            _start("tbb" if tbb_loaded else "workqueue")
         else:
             if chosen in ("tbb", "safe", "threadsafe", "forksafe"):
                 _load_tbb()
@@ -94,6 +98,15 @@ def choose_layer():
     layer = parallel.threading_layer()
     if layer == "workqueue":
         _serialise_launches()
+        if tbb_loaded:
+            # loaded, yet refused: the loader answers Numba's request for libtbb by name with
+            # the library loaded under that name first, and Open3D's wheel carries an older one
+            # (interface 12050; Numba asks for 12060, and its warning says only that TBB is off)
+            warnings.warn(
+                "raycore runs on Numba's workqueue threading layer, one parallel loop at a "
+                "time: Numba refused the tbb package's libtbb, most likely because an older "
+                "libtbb was loaded first (Open3D's wheel carries one). Import raycore before "
+                "open3d to run on TBB.", RuntimeWarning, stacklevel=3)
     elif layer == "omp" and config.THREADING_LAYER != "omp":
         warnings.warn(
             "Numba runs on its OpenMP threading layer, started before raycore was imported: "

@@ -153,3 +153,19 @@ def test_the_same_with_workqueue_forced():
         text=True, timeout=HANG_SECONDS)
     assert run.returncode == 0, run.stdout[-4000:] + run.stderr[-4000:]
     assert re.search(r"\b7 passed", run.stdout), run.stdout[-2000:]
+
+
+@pytest.mark.skipif(tbb_library_path() is None, reason="no tbb wheel on this platform")
+def test_an_older_libtbb_loaded_first_is_named():
+    """Open3D's wheel carries a libtbb older than Numba's TBB layer needs: imported before
+    raycore, it holds the library's name, Numba refuses TBB, and raycore says why it runs on
+    workqueue and what to do."""
+    pytest.importorskip("open3d", reason="Open3D has no wheel for this Python")
+    env = {name: value for name, value in os.environ.items()
+           if name != "NUMBA_THREADING_LAYER"}
+    script = "import open3d, raycore; print(raycore.info()['threading_layer'])"
+    run = subprocess.run([sys.executable, "-W", "always", "-c", script], env=env, cwd=ROOT,
+                         capture_output=True, text=True, timeout=HANG_SECONDS)
+    assert run.returncode == 0, run.stderr[-4000:]
+    assert run.stdout.split()[-1] == "workqueue"
+    assert "Import raycore before open3d to run on TBB" in run.stderr, run.stderr[-4000:]
