@@ -371,14 +371,36 @@ def _collapse_subtrees(nodes, refs, roots, queue_size, first_rows, wide, write, 
             stats[t, k] = own[k]
 
 
+@njit(cache=True)
+def _collapse_whole(nodes, refs, prim_count, prices, block):
+    """:func:`_wide_layout` of a tree built as one subtree (``top_count`` 1), in one call from
+    Python: its internal nodes' :func:`_ranked_costs`, then the collapse, counting rows and
+    filling them.  A small tree's collapse took a dozen calls, each dearer than its work."""
+    order = np.empty(max(2 * prim_count - 1, 1), np.int64)
+    none = np.empty(0, np.int64)
+    listed, _, internal = _breadth_first(refs, 0, 0, order, none)
+    costs = np.empty((internal, WIDTH), np.float32)
+    _ranked_costs(nodes, refs, order, listed, 0, costs, prices, block)
+    queue = np.empty(max(prim_count, 1), np.int64)
+    stats = np.zeros(4)
+    rows, _ = _collapse(nodes, refs, 0, 0, 0, none, none, queue,
+                        np.empty((0, NODE_WIDTH), np.float32), False, True, stats, costs, prices,
+                        block)
+    wide = np.empty((rows, NODE_WIDTH), np.float32)
+    _collapse(nodes, refs, 0, 0, 0, none, none, queue, wide, True, True, np.zeros(4), costs,
+              prices, block)
+    return wide, stats
+
+
 def _slot_costs(binary, prim_count, prices, block):
-    """:func:`_ranked_costs` of every internal binary node, (I, WIDTH) float32, numbered: the
-    top of the tree first, then each subtree built in parallel (on all cores).  Each subtree is
-    listed twice, to count its internal nodes and then to number them, so that the table is
-    sized to them before any is filled, as :func:`_collapse` counts rows before it writes them."""
+    """:func:`_ranked_costs` of every internal binary node of a tree built in several subtrees,
+    (I, WIDTH) float32, numbered: the top of the tree first, then each subtree built in
+    parallel (on all cores).  Each subtree is listed twice, to count its internal nodes and
+    then to number them, so that the table is sized to them before any is filled, as
+    :func:`_collapse` counts rows before it writes them."""
     refs = binary.nodes.view(np.int32)
-    top_count = binary.top_count if binary.top_count > 1 else 0  # 1: one subtree, the tree
-    order = np.empty(top_count or max(2 * prim_count - 1, 1), np.int64)
+    top_count = binary.top_count
+    order = np.empty(top_count, np.int64)
     boundary = np.empty(2 * top_count, np.int64)
     listed, bounded, top_internal = _breadth_first(refs, 0, top_count, order, boundary)
     roots = boundary[:bounded]
@@ -411,19 +433,12 @@ def _wide_layout(binary, prim_count, params):
     refs = nodes.view(np.int32)
     block = params.block_size
     prices = np.array([params.traversal_cost, params.intersection_cost])
+    if binary.top_count == 1:
+        return _collapse_whole(nodes, refs, prim_count, prices, block)
     costs = _slot_costs(binary, prim_count, prices, block)
     empty = np.empty((0, NODE_WIDTH), np.float32)
     none = np.empty(0, np.int64)
     stats = np.zeros(4)
-    if binary.top_count == 1:
-        # one subtree, the whole tree
-        queue = np.empty(max(prim_count, 1), np.int64)
-        rows, _ = _collapse(nodes, refs, 0, 0, 0, none, none, queue, empty, False, True, stats,
-                            costs, prices, block)
-        wide = _new_rows(rows)
-        _collapse(nodes, refs, 0, 0, 0, none, none, queue, wide, True, True, np.zeros(4), costs,
-                  prices, block)
-        return wide, stats
     queue = np.empty(binary.top_count, np.int64)
     deferred = np.empty(WIDTH * binary.top_count, np.int64)
     top_rows, count = _collapse(nodes, refs, 0, 0, binary.top_count, deferred, none, queue,
