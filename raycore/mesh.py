@@ -10,6 +10,7 @@ from numba import njit, prange
 from raycore.bvh.layout import build_bvh_from_records
 from raycore.bvh.leaves import pack_leaves
 from raycore.bvh.records import (
+    PARALLEL_FROM,
     PRIM_INDEX,
     PRIM_WIDTH,
     check_primitive_count,
@@ -38,48 +39,76 @@ def indices_outside(indices, count):
     return len(unsigned) > 0 and top >= np.uint64(count)
 
 
+@njit(cache=True)
+def _bound_faces(vertices, faces, start, end, part):
+    """Bounds of the vertices that faces ``start:end`` reference into ``part`` (6,) float64:
+    lo, then hi."""
+    part[0:3] = np.inf
+    part[3:6] = -np.inf
+    for f in range(start, end):
+        for k in range(3):
+            for a in range(3):
+                x = vertices[faces[f, k], a]
+                part[a] = min(part[a], x)
+                part[3 + a] = max(part[3 + a], x)
+
+
 @njit(cache=True, parallel=True)
+def _bound_chunks(vertices, faces, parts):
+    n = faces.shape[0]
+    for c in prange(len(parts)):
+        _bound_faces(vertices, faces, c * FACE_CHUNK, min(n, (c + 1) * FACE_CHUNK), parts[c])
+
+
 def referenced_bounds(vertices, faces):
     """(lo, hi): (3,) float64 bounds of the vertices that ``faces`` (F, 3) reference in
-    ``vertices`` (V, 3), without gathering the (F, 3, 3) corners."""
-    n = faces.shape[0]
-    chunks = (n + FACE_CHUNK - 1) // FACE_CHUNK
-    parts = np.empty((chunks, 6))
-    for c in prange(chunks):
-        parts[c, 0:3] = np.inf
-        parts[c, 3:6] = -np.inf
-        for f in range(c * FACE_CHUNK, min(n, (c + 1) * FACE_CHUNK)):
-            for k in range(3):
-                for a in range(3):
-                    x = vertices[faces[f, k], a]
-                    parts[c, a] = min(parts[c, a], x)
-                    parts[c, 3 + a] = max(parts[c, 3 + a], x)
-    lo = np.empty(3)
-    hi = np.empty(3)
+    ``vertices`` (V, 3), without gathering the (F, 3, 3) corners; a chunk of FACE_CHUNK faces a
+    core, on the calling thread below PARALLEL_FROM faces."""
+    parts = np.empty((max(-(-len(faces) // FACE_CHUNK), 1), 6))
+    if len(faces) < PARALLEL_FROM:
+        _bound_faces(vertices, faces, 0, len(faces), parts[0])
+    else:
+        _bound_chunks(vertices, faces, parts)
+    return parts[:, :3].min(axis=0), parts[:, 3:].max(axis=0)
+
+
+@njit(cache=True, inline="always")
+def _triangle_record(vertices, faces, prims, index, f):
+    """Write the record of face ``f`` into ``prims`` (and its int32 view ``index``)."""
     for a in range(3):
-        lo[a] = parts[:, a].min()
-        hi[a] = parts[:, 3 + a].max()
-    return lo, hi
+        x0 = vertices[faces[f, 0], a]
+        x1 = vertices[faces[f, 1], a]
+        x2 = vertices[faces[f, 2], a]
+        prims[f, a] = round_down32(min(x0, x1, x2))
+        prims[f, 3 + a] = round_up32(max(x0, x1, x2))
+    index[f, PRIM_INDEX] = f
+    index[f, PRIM_INDEX + 1] = 0
 
 
 @njit(cache=True, parallel=True)
+def _triangle_records_on_all_cores(vertices, faces):
+    prims = np.empty((faces.shape[0], PRIM_WIDTH), np.float32)
+    index = prims.view(np.int32)
+    for f in prange(faces.shape[0]):
+        _triangle_record(vertices, faces, prims, index, f)
+    return prims
+
+
+@njit(cache=True)
+def _triangle_records_here(vertices, faces):
+    prims = np.empty((faces.shape[0], PRIM_WIDTH), np.float32)
+    index = prims.view(np.int32)
+    for f in range(faces.shape[0]):
+        _triangle_record(vertices, faces, prims, index, f)
+    return prims
+
+
 def triangle_records(vertices, faces):
     """BVH primitive records of triangles: their boxes rounded outwards to float32 and their
     indices, (F, PRIM_WIDTH) float32 (see :mod:`raycore.bvh.build`), straight from ``vertices``
-    (V, 3) in the scene's dtype and ``faces`` (F, 3)."""
-    n = faces.shape[0]
-    prims = np.empty((n, PRIM_WIDTH), np.float32)
-    index = prims.view(np.int32)
-    for f in prange(n):
-        for a in range(3):
-            x0 = vertices[faces[f, 0], a]
-            x1 = vertices[faces[f, 1], a]
-            x2 = vertices[faces[f, 2], a]
-            prims[f, a] = round_down32(min(x0, x1, x2))
-            prims[f, 3 + a] = round_up32(max(x0, x1, x2))
-        index[f, PRIM_INDEX] = f
-        index[f, PRIM_INDEX + 1] = 0
-    return prims
+    (V, 3) in the scene's dtype and ``faces`` (F, 3); on all cores from PARALLEL_FROM faces."""
+    return (_triangle_records_here if len(faces) < PARALLEL_FROM
+            else _triangle_records_on_all_cores)(vertices, faces)
 
 
 class Mesh:

@@ -16,12 +16,13 @@ from raycore.bvh.records import (
     BINARY_COUNT,
     BINARY_REF,
     MAX_PRIMITIVES,
+    PARALLEL_FROM,
     PRIM_INDEX,
     check_primitive_count,
     records_from_bounds,
 )
 from raycore.bvh.simd import BLOCK_PLANES, lanes_for
-from raycore.mesh import Mesh
+from raycore.mesh import Mesh, referenced_bounds, triangle_records
 
 
 def random_boxes(count, seed=0):
@@ -327,6 +328,31 @@ def test_mesh_bounds_ignore_vertices_no_face_uses():
     vertices = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [50, 50, 50], [-9, -9, -9]])
     lo, hi = Mesh(vertices, [[0, 1, 2]]).bounds
     assert lo.tolist() == [0, 0, 0] and hi.tolist() == [1, 1, 0]
+
+
+@pytest.mark.parametrize("count", [PARALLEL_FROM - 1, PARALLEL_FROM, 3 * PARALLEL_FROM])
+def test_records_and_bounds_are_the_corners_on_one_thread_and_on_all_cores(count):
+    # below PARALLEL_FROM the passes run on the calling thread, from it on all cores: both
+    # must give the bounds of the triangles' corners, and boxes rounded outwards to float32
+    rng = np.random.default_rng(count)
+    vertices = rng.normal(size=(count, 3)) * 1e3
+    faces = rng.integers(0, count - 100, (count, 3))  # the last vertices unused
+    corners = vertices[faces]
+    lo, hi = referenced_bounds(vertices, faces)
+    assert np.array_equal(lo, corners.min(axis=(0, 1)))
+    assert np.array_equal(hi, corners.max(axis=(0, 1)))
+    stored = vertices.astype(np.float32)
+    records = triangle_records(stored, faces)
+    assert np.array_equal(records[:, :3], stored[faces].min(axis=1))
+    assert np.array_equal(records[:, 3:6], stored[faces].max(axis=1))
+    assert np.array_equal(records.view(np.int32)[:, PRIM_INDEX], np.arange(count))
+    box_lo, box_hi = corners.min(axis=1), corners.max(axis=1)
+    boxes = records_from_bounds(box_lo, box_hi)
+    down, up = box_lo.astype(np.float32), box_hi.astype(np.float32)
+    down = np.where(down > box_lo, np.nextafter(down, np.float32(-np.inf)), down)
+    up = np.where(up < box_hi, np.nextafter(up, np.float32(np.inf)), up)
+    assert np.array_equal(boxes[:, :3], down) and np.array_equal(boxes[:, 3:6], up)
+    assert np.array_equal(boxes.view(np.int32)[:, PRIM_INDEX], np.arange(count))
 
 
 def test_one_triangle_makes_a_tree_of_one_leaf():
