@@ -251,7 +251,7 @@ class Scene:
             table,
         )
         record.tree_bytes = top_nodes.nbytes + mesh_nodes.nbytes + all_blocks.nbytes
-        record.entry_points = {}
+        record.entry_points = queries.entry_points_for(record)
         self._record = record
 
     def _scene(self):

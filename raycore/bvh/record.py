@@ -42,7 +42,7 @@ class SceneRecord(structref.StructRefProxy):
     Python code also reads two attributes, set by the scene that packs the record (a field read
     from Python would compile a getter): ``tree_bytes``, the bytes of the wide rows and leaf
     blocks that traversal reads, and ``entry_points``, the compiled entries that queries called
-    with it (:func:`raycore.queries._compiled`).
+    with records of its type (:func:`raycore.queries._compiled`).
     """
 
 

@@ -47,6 +47,28 @@ def test_a_scene_without_shapes_hands_its_kernels_no_parameter_table(dtype):
     assert both.normal[1] == pytest.approx([0, 0, 1])
 
 
+def test_scenes_whose_records_share_a_type_share_the_entry_points_found(dtype):
+    # a query's first call about a record goes through Numba's dispatcher, which types every
+    # argument; later calls, about that record or another of its type, call the entry found
+    def triangle(z, with_sphere):
+        scene = Scene(dtype=dtype)
+        scene.add_mesh([[0, 0, z], [1, 0, z], [0, 1, z]], [[0, 1, 2]])
+        if with_sphere:
+            scene.add_sphere([0, 0, -3], 1.0)
+        return scene.build()
+
+    origins = np.zeros((2, 3))
+    directions = np.array([[0.1, 0.1, 1.0], [0.0, 0.0, -1.0]])
+    first = triangle(2, False)
+    assert first.intersect(origins, directions).t.tolist() == [2.0, np.inf]
+    same_type, other_type = triangle(4, False), triangle(4, True)
+    assert same_type._record.entry_points is first._record.entry_points
+    assert other_type._record.entry_points is not first._record.entry_points
+    assert same_type.intersect(origins, directions).t.tolist() == [4.0, np.inf]
+    hits = other_type.intersect(origins, directions)
+    assert hits.geom_id.tolist() == [0, 1] and hits.t.tolist() == [4.0, pytest.approx(2.0)]
+
+
 def test_no_rays_give_empty_results(dtype):
     scene = Scene(dtype=dtype)
     scene.add_sphere([0, 0, 0], 1.0)
