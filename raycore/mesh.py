@@ -86,20 +86,15 @@ def _triangle_record(vertices, faces, prims, index, f):
 
 
 @njit(cache=True, parallel=True)
-def _triangle_records_on_all_cores(vertices, faces):
+def _triangle_records(vertices, faces, on_all_cores):
     prims = np.empty((faces.shape[0], PRIM_WIDTH), np.float32)
     index = prims.view(np.int32)
-    for f in prange(faces.shape[0]):
-        _triangle_record(vertices, faces, prims, index, f)
-    return prims
-
-
-@njit(cache=True)
-def _triangle_records_here(vertices, faces):
-    prims = np.empty((faces.shape[0], PRIM_WIDTH), np.float32)
-    index = prims.view(np.int32)
-    for f in range(faces.shape[0]):
-        _triangle_record(vertices, faces, prims, index, f)
+    if on_all_cores:
+        for f in prange(faces.shape[0]):
+            _triangle_record(vertices, faces, prims, index, f)
+    else:  # see raycore.bvh.records._records
+        for f in range(faces.shape[0]):
+            _triangle_record(vertices, faces, prims, index, f)
     return prims
 
 
@@ -107,8 +102,7 @@ def triangle_records(vertices, faces):
     """BVH primitive records of triangles: their boxes rounded outwards to float32 and their
     indices, (F, PRIM_WIDTH) float32 (see :mod:`raycore.bvh.build`), straight from ``vertices``
     (V, 3) in the scene's dtype and ``faces`` (F, 3); on all cores from PARALLEL_FROM faces."""
-    return (_triangle_records_here if len(faces) < PARALLEL_FROM
-            else _triangle_records_on_all_cores)(vertices, faces)
+    return _triangle_records(vertices, faces, len(faces) >= PARALLEL_FROM)
 
 
 class Mesh:

@@ -67,20 +67,15 @@ def _box_record(lo, hi, prims, index, p):
 
 
 @njit(cache=True, parallel=True)
-def _records_on_all_cores(lo, hi):
+def _records(lo, hi, on_all_cores):
     prims = np.empty((lo.shape[0], PRIM_WIDTH), np.float32)
     index = prims.view(np.int32)
-    for p in prange(lo.shape[0]):
-        _box_record(lo, hi, prims, index, p)
-    return prims
-
-
-@njit(cache=True)
-def _records_here(lo, hi):
-    prims = np.empty((lo.shape[0], PRIM_WIDTH), np.float32)
-    index = prims.view(np.int32)
-    for p in range(lo.shape[0]):
-        _box_record(lo, hi, prims, index, p)
+    if on_all_cores:
+        for p in prange(lo.shape[0]):
+            _box_record(lo, hi, prims, index, p)
+    else:  # a loop of range, not prange: no parallel region, no thread woken
+        for p in range(lo.shape[0]):
+            _box_record(lo, hi, prims, index, p)
     return prims
 
 
@@ -88,7 +83,7 @@ def records_from_bounds(lo, hi):
     """Primitive records of boxes ``lo``, ``hi`` (float32 or float64, shape (F, 3)), rounded
     outwards to float32: an ndarray of float32, shape (F, PRIM_WIDTH); on all cores from
     PARALLEL_FROM boxes."""
-    return (_records_here if len(lo) < PARALLEL_FROM else _records_on_all_cores)(lo, hi)
+    return _records(lo, hi, len(lo) >= PARALLEL_FROM)
 
 
 def check_primitive_count(count):
