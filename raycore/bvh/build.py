@@ -340,8 +340,9 @@ def _build_whole(prims, nodes, refs, bins, costs):
     bound_range(prims, 0, len(prims), root, 0)
     for k in range(6):  # element by element: see _build_subtree
         nodes[0, k] = root[0, k]
-    return _build_subtree(prims, nodes, refs, 0, 0, len(prims), root[0, CENTROIDS:], 0, 1, bins,
-                          costs)
+    zero = np.int64(0)  # typed, not a literal: see raycore.bvh.layout._collapse_whole
+    return _build_subtree(prims, nodes, refs, zero, zero, len(prims), root[0, CENTROIDS:], zero,
+                          np.int64(1), bins, costs)
 
 
 def _split_top(prims, nodes, refs, bins, block, task_size):

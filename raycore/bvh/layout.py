@@ -376,19 +376,22 @@ def _collapse_whole(nodes, refs, prim_count, prices, block):
     """:func:`_wide_layout` of a tree built as one subtree (``top_count`` 1), in one call from
     Python: its internal nodes' :func:`_ranked_costs`, then the collapse, counting rows and
     filling them.  A small tree's collapse took a dozen calls, each dearer than its work."""
+    # typed values, not literals, so that these calls share the compiled functions that
+    # _wide_layout's calls from Python use (a literal compiles a function once more)
+    zero, no, yes = np.int64(0), np.bool_(False), np.bool_(True)
     order = np.empty(max(2 * prim_count - 1, 1), np.int64)
     none = np.empty(0, np.int64)
-    listed, _, internal = _breadth_first(refs, 0, 0, order, none)
+    listed, _, internal = _breadth_first(refs, zero, zero, order, none)
     costs = np.empty((internal, WIDTH), np.float32)
-    _ranked_costs(nodes, refs, order, listed, 0, costs, prices, block)
+    _ranked_costs(nodes, refs, order, listed, zero, costs, prices, block)
     queue = np.empty(max(prim_count, 1), np.int64)
     stats = np.zeros(4)
-    rows, _ = _collapse(nodes, refs, 0, 0, 0, none, none, queue,
-                        np.empty((0, NODE_WIDTH), np.float32), False, True, stats, costs, prices,
+    rows, _ = _collapse(nodes, refs, zero, zero, zero, none, none, queue,
+                        np.empty((0, NODE_WIDTH), np.float32), no, yes, stats, costs, prices,
                         block)
     wide = np.empty((rows, NODE_WIDTH), np.float32)
-    _collapse(nodes, refs, 0, 0, 0, none, none, queue, wide, True, True, np.zeros(4), costs,
-              prices, block)
+    _collapse(nodes, refs, zero, zero, zero, none, none, queue, wide, yes, yes, np.zeros(4),
+              costs, prices, block)
     return wide, stats
 
 
