@@ -199,7 +199,8 @@ def entry_points_for(record):
 
 
 def _first_call(record, entry, *arguments):
-    """Call ``entry`` through its dispatcher and keep its entry point in ``record``."""
+    """Call ``entry`` through its dispatcher and keep its entry point in ``record.entry_points``
+    (shared by every record of its type: :func:`entry_points_for`)."""
     answer = entry(*arguments)
     signature = tuple(map(entry.typeof_pyval, arguments))
     record.entry_points[entry] = getattr(entry.overloads.get(signature), "entry_point", entry)
