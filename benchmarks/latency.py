@@ -13,12 +13,16 @@ One measurement repeats a call until at least ``MIN_SECONDS`` pass, timing each 
 the mean time per call and the median; each figure is the best of ``REPEATS`` measurements taken
 in interleaved rounds over the contenders.  The mean is what a loop of calls costs; the median
 shows the typical call when a few calls stall (on a machine shared with other work, a parallel
-region can wait milliseconds for a thread the system has not scheduled).  Writes
+region can wait milliseconds for a thread the system has not scheduled).  Batches of
+``FRESH_FROM`` rays or more are also timed with fresh rays at each call: the calls take the
+set's consecutive slices of n rays in turn, so that no call finds the nodes its rays visit in
+the caches from the call before.  Writes
 benchmarks/results/latency.json, docs/latency.md and the log-log chart docs/latency.png.
 Run with ``python -m benchmarks.latency [--quick]`` (part of ``make bench``).
 """
 
 import argparse
+import itertools
 import json
 import os
 import tempfile
@@ -41,6 +45,11 @@ BATCHES = (1, 4, 16, 64, 256, 1024, 4096, 16_384, 65_536, 262_144, 1_048_576)
 QUICK_BATCHES = (1, 16, 256, 4096, 65_536)
 REPEATS = 3
 MIN_SECONDS = 0.2
+#: Batches from this size on are timed with fresh rays too.  A loop of calls on the same rays
+#: keeps the tree's nodes that they visit in the caches, and a library gains from that as far
+#: as its threads take the same rays at each call: on the 2-core AVX2 EPYC, 4,096 rays took
+#: Open3D 413-438 us a call repeated and 603-666 fresh, raycore 547-562 and 622-634 (medians).
+FRESH_FROM = 1024
 #: (query, library) -> label, in the order of the table's columns
 LABELS = {
     ("closest", "raycore"): "raycore intersect",
@@ -83,9 +92,17 @@ def calls_for(scenes, origins, directions):
     }
 
 
+def cycling(calls):
+    """A function of no arguments that makes one of ``calls`` at each call, in turn."""
+    turns = itertools.cycle(calls)
+    return lambda: next(turns)()
+
+
 def measure(batches, min_seconds):
-    """{batch: {(query, library): (mean, median) seconds per call, each the best of
-    ``REPEATS`` measurements}}, and the fraction of the rays that hit."""
+    """``(times, fresh_times, hit_fraction)``: {batch: {(query, library): (mean, median)
+    seconds per call, each the best of ``REPEATS`` measurements}} on the same rays at each call,
+    the same with fresh rays at each call (batches from FRESH_FROM rays, smaller than the set),
+    and the fraction of the rays that hit."""
     vertices, faces = meshes.load(MESH)
     scenes = (
         contenders.raycore_build(contenders.raycore_mesh(vertices, faces, np.float32),
@@ -97,9 +114,17 @@ def measure(batches, min_seconds):
     origins, directions = contenders.embreex_arrays(*random_rays(lo, hi, max(batches), seed=2))
     hit_fraction = float(np.mean(
         scenes[1].test_occlusions(contenders.open3d_rays(origins, directions)).numpy()))
-    times = {}
+    times, fresh_times = {}, {}
     for batch in batches:
-        calls = calls_for(scenes, origins[:batch], directions[:batch])
+        calls = {("same", *key): call for key, call in
+                 calls_for(scenes, origins[:batch], directions[:batch]).items()}
+        if FRESH_FROM <= batch < len(origins):
+            # inputs in native form for every slice, made before any clock starts
+            slices = [calls_for(scenes, origins[start:start + batch],
+                                directions[start:start + batch])
+                      for start in range(0, len(origins) - batch + 1, batch)]
+            calls.update({("fresh", *key): cycling([made[key] for made in slices])
+                          for key in LABELS})
         for call in calls.values():
             call()  # first calls (kernel loading, thread pools) outside the timing
         best = dict.fromkeys(calls, (np.inf, np.inf))
@@ -107,11 +132,14 @@ def measure(batches, min_seconds):
             for key, call in calls.items():
                 mean, median = seconds_per_call(call, min_seconds)
                 best[key] = (min(best[key][0], mean), min(best[key][1], median))
-        times[batch] = best
-        print(f"{batch:>9,} rays: " + ", ".join(
-            f"{LABELS[key]} {_format(mean)} ({_format(median)})"
-            for key, (mean, median) in best.items()), flush=True)
-    return times, hit_fraction
+        for rays, found in (("same", times), ("fresh", fresh_times)):
+            row = {key[1:]: value for key, value in best.items() if key[0] == rays}
+            if row:
+                found[batch] = row
+                print(f"{batch:>9,} {rays} rays: " + ", ".join(
+                    f"{LABELS[key]} {_format(mean)} ({_format(median)})"
+                    for key, (mean, median) in row.items()), flush=True)
+    return times, fresh_times, hit_fraction
 
 
 def _format(seconds):
@@ -168,13 +196,9 @@ def chart(times, path, title):
     plt.close(figure)
 
 
-def markdown(times, hit_fraction, duration, load_average):
-    """docs/latency.md: the table of the chart, and raycore's time over Open3D's."""
-    keys = list(LABELS)
-
-    def ratio(row, query, which):
-        return row[(query, "raycore")][which] / row[(query, "open3d")][which]
-
+def markdown(times, fresh_times, hit_fraction, duration, load_average):
+    """docs/latency.md: the table of the chart, its rows again with fresh rays at each call,
+    and raycore's time over Open3D's."""
     lines = [
         "# Time per call against rays per call",
         "",
@@ -191,17 +215,35 @@ def markdown(times, hit_fraction, duration, load_average):
         f"average {load_average[0]:.1f} at the start, {load_average[1]:.1f} at the end): the "
         "figures are indicative.",
         "",
-        "| rays per call | " + " | ".join(LABELS[k] for k in keys)
-        + " | intersect / cast_rays | occluded / test_occlusions |",
-        "|---:|" + "---:|" * (len(keys) + 2),
+        "Every call of the loop casts the same rays (the set's first n):",
+        "",
+        *_table(times),
     ]
+    if fresh_times:
+        lines += ["", "Fresh rays at each call: the loop's calls take the set's consecutive "
+                  "slices of n rays in turn, so that the caches do not hold the nodes that a "
+                  "call's rays visit from the call before (what a stream of different rays "
+                  "meets):", "", *_table(fresh_times)]
+    return "\n".join(lines) + "\n"
+
+
+def _table(times):
+    """The markdown table's lines of ``times`` ({batch: {(query, library): (mean, median)}})."""
+    keys = list(LABELS)
+
+    def ratio(row, query, which):
+        return row[(query, "raycore")][which] / row[(query, "open3d")][which]
+
+    lines = ["| rays per call | " + " | ".join(LABELS[k] for k in keys)
+             + " | intersect / cast_rays | occluded / test_occlusions |",
+             "|---:|" + "---:|" * (len(keys) + 2)]
     for batch in sorted(times):
         row = times[batch]
         cells = [f"{_format(row[k][0])} ({_format(row[k][1])})" for k in keys]
         cells += [f"{ratio(row, query, 0):.2f} ({ratio(row, query, 1):.2f})"
                   for query in ("closest", "any")]
         lines.append(f"| {batch:,} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def main(argv=None):
@@ -219,17 +261,22 @@ def main(argv=None):
     docs.mkdir(parents=True, exist_ok=True)
     start, load_at_start = time.perf_counter(), os.getloadavg()[0]
     batches, min_seconds = (QUICK_BATCHES, 0.02) if args.quick else (BATCHES, MIN_SECONDS)
-    times, hit_fraction = measure(batches, min_seconds)
+    times, fresh_times, hit_fraction = measure(batches, min_seconds)
     duration = time.perf_counter() - start
     chart(times, docs / "latency.png",
           f"Time per call, random rays inside {MESH} (float32, 2 cores)")
     load_average = (load_at_start, os.getloadavg()[0])
-    (docs / "latency.md").write_text(markdown(times, hit_fraction, duration, load_average))
+    (docs / "latency.md").write_text(markdown(times, fresh_times, hit_fraction, duration,
+                                              load_average))
+
+    def per_call(found):
+        return {str(batch): {f"{q}/{lib}": {"mean": mean, "median": median}
+                             for (q, lib), (mean, median) in row.items()}
+                for batch, row in found.items()}
+
     record = {"mesh": MESH, "hit_fraction": hit_fraction, "duration_seconds": duration,
-              "load_average": load_average,
-              "seconds_per_call": {str(batch): {f"{q}/{lib}": {"mean": mean, "median": median}
-                                                for (q, lib), (mean, median) in row.items()}
-                                   for batch, row in times.items()}}
+              "load_average": load_average, "seconds_per_call": per_call(times),
+              "fresh_rays_seconds_per_call": per_call(fresh_times)}
     (results / "latency.json").write_text(json.dumps(record, indent=1) + "\n")
     print(f"{docs / 'latency.png'} and latency.md written in {duration:.0f} s")
 
