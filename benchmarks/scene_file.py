@@ -8,7 +8,12 @@ compiling or cache loading:
 * ``build``: ``Scene(...).add_mesh(v, f)`` then ``build()`` (validation, BVH, leaf blocks);
 * ``load``: ``Scene.load(path)`` (read, checksums, every index checked, record assembled);
 * ``load_mmap``: the same with ``mmap=True`` (pages read when touched; checksums read them all);
-* ``unpickle``: ``pickle.loads`` of the pickled Scene.
+* ``unpickle``: ``pickle.loads`` of the pickled Scene;
+* ``read``: ``raycore.arrayfile.read(path)``, the part of a load before the scene: the file read,
+  its checksums and header checked, its arrays viewed;
+* ``read_bytes``: ``Path.read_bytes()``, the file's bytes in one plain read and nothing else:
+  for a small file, about the least that any loader of it in Python takes (``read`` reads a
+  file of ``arrayfile.THREADED_BYTES`` or more on threads, into huge pages, and beats it).
 
 A load that is not followed by equal answers would be worthless: each loaded scene answers
 10,000 random rays and must match the built one.  Prints a table and writes
@@ -27,7 +32,7 @@ import numpy as np
 
 from benchmarks.meshes import load, shared_mesh_names, warm_up_mesh
 from benchmarks.timing import interleaved_best_times
-from raycore import Scene
+from raycore import Scene, arrayfile
 
 RESULTS = Path(__file__).resolve().parent / "results" / "scene_file.json"
 
@@ -48,6 +53,8 @@ def measure(name, vertices, faces, directory, rounds):
         "load": lambda: Scene.load(path),
         "load_mmap": lambda: Scene.load(path, mmap=True),
         "unpickle": lambda: pickle.loads(pickled),
+        "read": lambda: arrayfile.read(path),
+        "read_bytes": path.read_bytes,
     }, rounds=rounds)
     rng = np.random.default_rng(0)
     lo, hi = scene.bounds
@@ -82,7 +89,8 @@ def main(argv=None):
             print(f"{name:16s} {row['triangles']:>9,d} tris  build {row['build_s']:.4f} s  "
                   f"load {row['load_s']:.4f} s ({row['build_over_load']:.0f}x)  "
                   f"mmap {row['load_mmap_s']:.4f} s ({row['build_over_load_mmap']:.0f}x)  "
-                  f"unpickle {row['unpickle_s']:.4f} s  file {row['file_bytes']:,d} B  "
+                  f"unpickle {row['unpickle_s']:.4f} s  read {row['read_s'] * 1e6:.0f} us "
+                  f"(bytes {row['read_bytes_s'] * 1e6:.0f} us)  file {row['file_bytes']:,d} B  "
                   f"pickle {row['pickle_bytes']:,d} B", flush=True)
     RESULTS.write_text(json.dumps({"machine": platform.processor() or platform.machine(),
                                    "cpus": os.cpu_count(), "load_average": os.getloadavg(),
