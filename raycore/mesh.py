@@ -62,10 +62,11 @@ def _bound_chunks(vertices, faces, parts):
 
 def referenced_bounds(vertices, faces):
     """(lo, hi): (3,) float64 bounds of the vertices that ``faces`` (F, 3) reference in
-    ``vertices`` (V, 3), without gathering the (F, 3, 3) corners; a chunk of FACE_CHUNK faces a
-    core, on the calling thread below PARALLEL_FROM faces."""
+    ``vertices`` (V, 3), without gathering the (F, 3, 3) corners: a chunk of FACE_CHUNK faces a
+    core, and a lone chunk on the calling thread (a parallel region of one item would only wake
+    the sleeping threads)."""
     parts = np.empty((max(-(-len(faces) // FACE_CHUNK), 1), 6))
-    if len(faces) < PARALLEL_FROM:
+    if len(parts) == 1:
         _bound_faces(vertices, faces, 0, len(faces), parts[0])
     else:
         _bound_chunks(vertices, faces, parts)

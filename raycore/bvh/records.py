@@ -46,12 +46,12 @@ def round_up32(x):
     return min(max(y, -FLOAT32_MAX), FLOAT32_MAX)
 
 
-#: Primitives from which records (and a mesh's bounds, :func:`raycore.mesh.referenced_bounds`)
-#: are made on all cores; fewer are made on the calling thread.  Between builds the threads
-#: sleep, and waking them took 30-80 us of a small build (suzanne, 968 triangles: 757 -> 596 us
-#: with the three passes on one thread; a triangle's record takes 6 ns), as long as the records
-#: of some 10,000 triangles.  The same count as the build's MIN_TASK, below which the tree is
-#: built on one thread too.
+#: Primitives from which records are made on all cores; fewer are made on the calling thread
+#: (as a mesh's bounds are, up to a chunk of faces: :func:`raycore.mesh.referenced_bounds`).
+#: Between builds the threads sleep, and waking them took 30-80 us of a small build (suzanne,
+#: 968 triangles: 757 -> 596 us with the three passes on one thread; a triangle's record takes
+#: 6 ns), as long as the records of some 10,000 triangles.  The same count as the build's
+#: MIN_TASK, below which the tree is built on one thread too.
 PARALLEL_FROM = 16384
 
 

@@ -22,7 +22,7 @@ from raycore.bvh.records import (
     records_from_bounds,
 )
 from raycore.bvh.simd import BLOCK_PLANES, lanes_for
-from raycore.mesh import Mesh, referenced_bounds, triangle_records
+from raycore.mesh import FACE_CHUNK, Mesh, referenced_bounds, triangle_records
 
 
 def random_boxes(count, seed=0):
@@ -330,10 +330,11 @@ def test_mesh_bounds_ignore_vertices_no_face_uses():
     assert lo.tolist() == [0, 0, 0] and hi.tolist() == [1, 1, 0]
 
 
-@pytest.mark.parametrize("count", [PARALLEL_FROM - 1, PARALLEL_FROM, 3 * PARALLEL_FROM])
+@pytest.mark.parametrize("count", [PARALLEL_FROM - 1, PARALLEL_FROM, 2 * FACE_CHUNK + 1])
 def test_records_and_bounds_are_the_corners_on_one_thread_and_on_all_cores(count):
-    # below PARALLEL_FROM the passes run on the calling thread, from it on all cores: both
-    # must give the bounds of the triangles' corners, and boxes rounded outwards to float32
+    # records are made on the calling thread below PARALLEL_FROM, bounds within one chunk of
+    # FACE_CHUNK faces, and on all cores above: both must give the bounds of the triangles'
+    # corners, and boxes rounded outwards to float32
     rng = np.random.default_rng(count)
     vertices = rng.normal(size=(count, 3)) * 1e3
     faces = rng.integers(0, count - 100, (count, 3))  # the last vertices unused
